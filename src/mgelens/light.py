@@ -1,0 +1,303 @@
+"""Light profiles: elliptical Gaussian, elliptical Sérsic and MGE sets (SPEC §2).
+
+Conventions: (x, y) in arcsec, angles in degrees counter-clockwise from +x,
+``ell_comps = (e1, e2)`` (see :mod:`mgelens.geometry`); intensities are surface
+brightness in data units per pixel (e.g. e⁻ s⁻¹ pix⁻¹), so a profile's pixel sum is
+its integral over arcsec² divided by Δ².
+
+The fitted MGE basis uses the PyAutoGalaxy ("anchor") Gaussian of SPEC §2.2,
+G = I₀ exp(−(q² x′² + y′²)/(2σ²)), whose ``sigma`` is the **minor-axis** dispersion;
+mgefit / the paper quote the **major-axis** dispersion σ_p = σ/q
+(:meth:`Gaussian.from_major_axis`).
+"""
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+from numba import prange
+from scipy.special import gamma as gamma_function
+
+from mgelens._jit import njit
+from mgelens.convolve import Convolver
+from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from, to_profile_frame
+from mgelens.grid import SubGrid, adaptive_sub_sizes, pixel_centres, sub_grid
+
+EXPONENT_CUTOFF = 100.0  # exp(−100) ≈ 4e−44: Gaussian terms beyond this are dropped
+
+
+@dataclass(frozen=True)
+class Gaussian:
+    """Elliptical Gaussian, anchor form (SPEC §2.2).
+
+    Attributes
+    ----------
+    centre : (x, y) arcsec
+    ell_comps : (e1, e2)
+    sigma : float
+        Minor-axis dispersion in arcsec (major-axis dispersion is ``sigma / q``).
+    intensity : float
+        Central surface brightness I₀ (data units per pixel).
+    """
+
+    centre: tuple[float, float] = (0.0, 0.0)
+    ell_comps: tuple[float, float] = (0.0, 0.0)
+    sigma: float = 1.0
+    intensity: float = 1.0
+
+    def __post_init__(self):
+        if not self.sigma > 0.0:
+            raise ValueError(f"Gaussian sigma must be > 0 arcsec, got {self.sigma}")
+
+    @classmethod
+    def from_major_axis(
+        cls,
+        centre: tuple[float, float],
+        axis_ratio: float,
+        angle: float,
+        sigma_major: float,
+        intensity: float = 1.0,
+    ) -> "Gaussian":
+        """Gaussian from the mgefit / paper parameters (major-axis σ, q, φ in degrees)."""
+        return cls(
+            centre=centre,
+            ell_comps=ell_comps_from(axis_ratio, angle),
+            sigma=axis_ratio * sigma_major,
+            intensity=intensity,
+        )
+
+    @property
+    def axis_ratio(self) -> float:
+        return axis_ratio_and_angle_from(self.ell_comps)[0]
+
+    @property
+    def angle(self) -> float:
+        return axis_ratio_and_angle_from(self.ell_comps)[1]
+
+    @property
+    def sigma_major(self) -> float:
+        """Major-axis dispersion σ/q (the mgefit / paper σ), arcsec."""
+        return self.sigma / self.axis_ratio
+
+    def image(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Surface brightness at (x, y) (arrays of any matching shape)."""
+        q, angle = self.axis_ratio, self.angle
+        xp, yp = to_profile_frame(x, y, self.centre, angle)
+        return self.intensity * np.exp(-(q**2 * xp**2 + yp**2) / (2.0 * self.sigma**2))
+
+    def total_flux(self, pixel_scale: float = 1.0) -> float:
+        """Integral 2πσ²I₀/q, divided by Δ² to give a pixel sum for ``pixel_scale`` Δ."""
+        return 2.0 * np.pi * self.sigma**2 * self.intensity / self.axis_ratio / pixel_scale**2
+
+
+def sersic_constant(sersic_index: float) -> float:
+    """b_n of Ciotti & Bertin (1999), the asymptotic series used by the anchor (SPEC §2.3)."""
+    n = sersic_index
+    return (
+        2.0 * n
+        - 1.0 / 3.0
+        + 4.0 / (405.0 * n)
+        + 46.0 / (25515.0 * n**2)
+        + 131.0 / (1148175.0 * n**3)
+        - 2194697.0 / (30690717750.0 * n**4)
+    )
+
+
+@dataclass(frozen=True)
+class Sersic:
+    """Elliptical Sérsic, I = I_e exp{−b_n[(ξ/R_e)^{1/n} − 1]}, ξ = sqrt(q x′² + y′²/q).
+
+    ``effective_radius`` R_e is the circularised half-light radius in arcsec and
+    ``intensity`` I_e the surface brightness at R_e (SPEC §2.3).
+    """
+
+    centre: tuple[float, float] = (0.0, 0.0)
+    ell_comps: tuple[float, float] = (0.0, 0.0)
+    effective_radius: float = 1.0
+    sersic_index: float = 4.0
+    intensity: float = 1.0
+
+    def __post_init__(self):
+        if not self.effective_radius > 0.0:
+            raise ValueError(f"effective_radius must be > 0, got {self.effective_radius}")
+        if not 0.2 <= self.sersic_index <= 10.0:
+            raise ValueError(f"sersic_index must be in [0.2, 10], got {self.sersic_index}")
+
+    def image(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        q, angle = axis_ratio_and_angle_from(self.ell_comps)
+        xp, yp = to_profile_frame(x, y, self.centre, angle)
+        xi = np.sqrt(q * xp**2 + yp**2 / q)
+        b_n = sersic_constant(self.sersic_index)
+        exponent = (xi / self.effective_radius) ** (1.0 / self.sersic_index) - 1.0
+        return self.intensity * np.exp(-b_n * exponent)
+
+    def total_flux(self, pixel_scale: float = 1.0) -> float:
+        """Analytic integral 2π n R_e² I_e e^{b_n} Γ(2n)/b_n^{2n}, divided by Δ²."""
+        n = self.sersic_index
+        b_n = sersic_constant(n)
+        flux = (
+            2.0
+            * np.pi
+            * n
+            * self.effective_radius**2
+            * self.intensity
+            * np.exp(b_n)
+            * gamma_function(2.0 * n)
+            / b_n ** (2.0 * n)
+        )
+        return flux / pixel_scale**2
+
+
+def log_spaced_sigmas(sigma_min: float, sigma_max: float, n_gaussians: int) -> np.ndarray:
+    """σ_k = 10^{lg σ_min + k (lg σ_max − lg σ_min)/(N − 1)}, k = 0..N−1 (SPEC §2.4)."""
+    if not 0.0 < sigma_min < sigma_max:
+        raise ValueError(f"need 0 < sigma_min < sigma_max, got {sigma_min}, {sigma_max}")
+    if n_gaussians < 2:
+        raise ValueError(f"an MGE set needs at least 2 Gaussians, got {n_gaussians}")
+    return np.logspace(np.log10(sigma_min), np.log10(sigma_max), n_gaussians)
+
+
+@dataclass(frozen=True)
+class MGESet:
+    """N Gaussians sharing centre and ell_comps with fixed (minor-axis) σ (SPEC §2.4).
+
+    Each Gaussian is a linear object: its column is built with I₀ = 1 and its solved
+    coefficient is I₀. Four non-linear parameters: centre (x, y) and ell_comps (e1, e2).
+    """
+
+    centre: tuple[float, float]
+    ell_comps: tuple[float, float]
+    sigmas: np.ndarray = field(repr=False)
+
+    def __post_init__(self):
+        sigmas = np.asarray(self.sigmas, dtype=float)
+        if sigmas.ndim != 1 or sigmas.size == 0 or np.any(sigmas <= 0):
+            raise ValueError("MGESet sigmas must be a non-empty 1D array of positive values")
+        if np.any(np.diff(sigmas) <= 0):
+            raise ValueError("MGESet sigmas must be strictly increasing")
+        object.__setattr__(self, "sigmas", sigmas)
+
+    @classmethod
+    def extended(
+        cls,
+        centre: tuple[float, float],
+        ell_comps: tuple[float, float],
+        pixel_scale: float,
+        mask_radius: float,
+        n_gaussians: int = 30,
+        sigma_min: float | None = None,
+    ) -> "MGESet":
+        """Paper set: N_g = 30, σ from Δ/5 (or ``sigma_min``) to the mask radius."""
+        low = pixel_scale / 5.0 if sigma_min is None else sigma_min
+        return cls(centre, ell_comps, log_spaced_sigmas(low, mask_radius, n_gaussians))
+
+    @classmethod
+    def point(
+        cls, centre: tuple[float, float], ell_comps: tuple[float, float], pixel_scale: float
+    ) -> "MGESet":
+        """Point set: 10 Gaussians, σ log-spaced from Δ/5 to 2Δ, own centre and ell_comps."""
+        return cls(centre, ell_comps, log_spaced_sigmas(pixel_scale / 5.0, 2.0 * pixel_scale, 10))
+
+    @property
+    def n_gaussians(self) -> int:
+        return self.sigmas.size
+
+    def gaussians(self, intensities: np.ndarray | None = None) -> list[Gaussian]:
+        """The set as individual :class:`Gaussian` objects (unit intensity by default)."""
+        values = np.ones(self.n_gaussians) if intensities is None else intensities
+        return [
+            Gaussian(self.centre, self.ell_comps, float(s), float(i))
+            for s, i in zip(self.sigmas, values, strict=True)
+        ]
+
+    def columns(self, grid: SubGrid) -> np.ndarray:
+        """Unit-intensity images binned over ``grid``: (n_pixels, N_g), before the PSF."""
+        q, angle = axis_ratio_and_angle_from(self.ell_comps)
+        return _gaussian_columns(
+            grid.x,
+            grid.y,
+            grid.starts,
+            grid.sub_sizes,
+            float(self.centre[0]),
+            float(self.centre[1]),
+            float(q),
+            float(np.deg2rad(angle)),
+            1.0 / (2.0 * self.sigmas**2),
+        )
+
+    def image(self, x: np.ndarray, y: np.ndarray, intensities: np.ndarray) -> np.ndarray:
+        """Σ_k I_k G_k(x, y) at the given points (no over-sampling, no PSF)."""
+        return sum(g.image(x, y) for g in self.gaussians(intensities))
+
+
+@njit(parallel=True, fastmath=True)
+def _gaussian_columns(x, y, starts, sub_sizes, xc, yc, q, phi, inv_two_sigma2):
+    n_pix = starts.size
+    n_g = inv_two_sigma2.size
+    out = np.empty((n_pix, n_g))
+    cos_phi = np.cos(phi)
+    sin_phi = np.sin(phi)
+    q2 = q * q
+    for p in prange(n_pix):
+        acc = np.zeros(n_g)
+        n_sub = sub_sizes[p] * sub_sizes[p]
+        for s in range(starts[p], starts[p] + n_sub):
+            dx = x[s] - xc
+            dy = y[s] - yc
+            xp = dx * cos_phi + dy * sin_phi
+            yp = -dx * sin_phi + dy * cos_phi
+            rr = q2 * xp * xp + yp * yp
+            for k in range(n_g - 1, -1, -1):
+                exponent = rr * inv_two_sigma2[k]
+                if exponent > EXPONENT_CUTOFF:
+                    break
+                acc[k] += np.exp(-exponent)
+        for k in range(n_g):
+            out[p, k] = acc[k] / n_sub
+    return out
+
+
+@dataclass(frozen=True)
+class LightGrid:
+    """Over-sampled evaluation grid + PSF for lens-light images inside a mask.
+
+    Light is evaluated on the mask ∪ blurring region with per-pixel sub-sizes
+    (SPEC §1.3 DECISION: ``sub_size`` everywhere, ``sub_size_centre`` within
+    ``centre_radius`` arcsec of ``centre``), binned, PSF-convolved and cut to the mask.
+    """
+
+    convolver: Convolver
+    grid: SubGrid
+
+    @classmethod
+    def from_mask(
+        cls,
+        mask: np.ndarray,
+        psf: np.ndarray,
+        pixel_scale: float,
+        centre: tuple[float, float] = (0.0, 0.0),
+        sub_size: int = 4,
+        sub_size_centre: int = 16,
+        centre_radius: float = 0.3,
+        origin: tuple[float, float] = (0.0, 0.0),
+    ) -> "LightGrid":
+        convolver = Convolver(mask, psf)
+        x, y = pixel_centres(mask.shape, pixel_scale, origin)
+        region = ~convolver.extended_mask
+        xe, ye = x[region], y[region]
+        sizes = adaptive_sub_sizes(xe, ye, centre, centre_radius, sub_size, sub_size_centre)
+        return cls(convolver=convolver, grid=sub_grid(xe, ye, pixel_scale, sizes))
+
+    @cached_property
+    def n_image_pixels(self) -> int:
+        return int(np.count_nonzero(~self.convolver.mask))
+
+    def blurred_columns(self, sets: list[MGESet]) -> np.ndarray:
+        """PSF-convolved unit-intensity columns of all sets, (N_I, Σ N_g), set by set."""
+        columns = np.concatenate([s.columns(self.grid) for s in sets], axis=1)
+        return self.convolver.blur_columns(columns, include_blurring=True)
+
+    def blurred_image(self, profiles: list) -> np.ndarray:
+        """PSF-convolved image (N_I,) of profiles with an ``image(x, y)`` method."""
+        values = sum(p.image(self.grid.x, self.grid.y) for p in profiles)
+        return self.convolver.blur_columns(self.grid.bin(values), include_blurring=True)

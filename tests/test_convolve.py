@@ -1,0 +1,85 @@
+import numpy as np
+import pytest
+from scipy import signal
+
+from mgelens.convolve import Convolver, convolve_image
+from mgelens.grid import pixel_centres
+
+
+def brute_force_convolution(image, psf):
+    ky, kx = psf.shape
+    out = np.zeros_like(image)
+    for r in range(image.shape[0]):
+        for c in range(image.shape[1]):
+            total = 0.0
+            for a in range(ky):
+                for b in range(kx):
+                    rr, cc = r - a + ky // 2, c - b + kx // 2
+                    if 0 <= rr < image.shape[0] and 0 <= cc < image.shape[1]:
+                        total += psf[a, b] * image[rr, cc]
+            out[r, c] = total
+    return out
+
+
+@pytest.fixture
+def asymmetric_psf():
+    rng = np.random.default_rng(7)
+    psf = rng.random((5, 3))
+    return psf / psf.sum()
+
+
+@pytest.mark.parametrize("method", ["direct", "fft", "auto"])
+def test_convolve_image_equals_direct_summation(asymmetric_psf, method):
+    image = np.random.default_rng(1).random((17, 12))
+    expected = brute_force_convolution(image, asymmetric_psf)
+    assert np.allclose(convolve_image(image, asymmetric_psf, method), expected, atol=1e-14)
+
+
+def test_convolution_moves_light_the_right_way():
+    psf = np.zeros((3, 3))
+    psf[2, 1] = 1.0  # kernel shifts by +1 row (+y)
+    image = np.zeros((5, 5))
+    image[2, 2] = 1.0
+    out = convolve_image(image, psf)
+    assert out[3, 2] == 1.0
+
+
+@pytest.mark.parametrize("include_blurring", [True, False])
+@pytest.mark.parametrize("method", ["direct", "fft"])
+def test_blur_columns_equals_masked_native_convolution(asymmetric_psf, include_blurring, method):
+    x, y = pixel_centres((31, 29), 0.1)
+    mask = np.hypot(x - 0.2, y) > 1.1
+    conv = Convolver(mask, asymmetric_psf)
+    in_mask = conv.input_mask(include_blurring)
+    rng = np.random.default_rng(2)
+    columns = rng.random((np.count_nonzero(~in_mask), 4))
+    out = conv.blur_columns(columns, include_blurring, method)
+    for k in range(4):
+        native = np.zeros(mask.shape)
+        native[~in_mask] = columns[:, k]
+        expected = signal.convolve2d(native, asymmetric_psf, mode="same")[~mask]
+        assert np.allclose(out[:, k], expected, atol=1e-13)
+    single = conv.blur_columns(columns[:, 0], include_blurring, method)
+    assert np.allclose(single, out[:, 0], atol=1e-14)
+
+
+def test_blurring_region_lets_outside_light_in(asymmetric_psf):
+    x, y = pixel_centres((21, 21), 0.1)
+    mask = np.hypot(x, y) > 0.6
+    conv = Convolver(mask, asymmetric_psf)
+    assert np.count_nonzero(~conv.extended_mask) > np.count_nonzero(~mask)
+    values = np.where(mask[~conv.extended_mask], 1.0, 0.0)  # light only outside the mask
+    assert conv.blur_columns(values, include_blurring=True).max() > 0.0
+
+
+def test_bad_inputs_raise(asymmetric_psf):
+    mask = np.zeros((9, 9), dtype=bool)
+    with pytest.raises(ValueError, match="odd"):
+        Convolver(mask, np.ones((4, 3)))
+    with pytest.raises(ValueError, match="NaN"):
+        convolve_image(np.ones((5, 5)), np.full((3, 3), np.nan))
+    conv = Convolver(mask, asymmetric_psf)
+    with pytest.raises(ValueError, match="rows"):
+        conv.blur_columns(np.ones((5, 2)))
+    with pytest.raises(ValueError, match="method"):
+        convolve_image(np.ones((5, 5)), asymmetric_psf, method="magic")
