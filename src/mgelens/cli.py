@@ -1,17 +1,43 @@
-"""Command-line interface: ``mgelens <command> ...`` (file in -> file out)."""
+"""Command-line interface: ``mgelens <command> ...`` (file in -> file out).
+
+Every module in :mod:`mgelens.commands` is one subcommand: it defines ``register(subparsers)``,
+which adds its parser and sets ``func`` to a callable taking the parsed arguments and
+returning an exit code. Workflow rules call these commands, so any step can be rerun by
+hand without Snakemake.
+"""
 
 import argparse
+import importlib
+import logging
+import pkgutil
+import sys
 
-from mgelens import __version__
+from mgelens import __version__, commands
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="mgelens", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="mgelens",
+        description="Strong-lens modelling with an MGE lens light (He et al. 2024).",
+    )
     parser.add_argument("--version", action="version", version=f"mgelens {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for module in sorted(m.name for m in pkgutil.iter_modules(commands.__path__)):
+        importlib.import_module(f"mgelens.commands.{module}").register(subparsers)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``mgelens`` console script; returns the exit code."""
-    build_parser().parse_args(argv)
-    return 0
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    if args.command is None:
+        parser.print_help()
+        return 2
+    return int(args.func(args) or 0)

@@ -20,7 +20,6 @@ import dataclasses
 import json
 import logging
 import os
-import uuid
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +29,8 @@ from astropy.io import fits
 from astropy.utils.exceptions import AstropyUserWarning
 from astropy.wcs import WCS, FITSFixedWarning
 from astropy.wcs.utils import proj_plane_pixel_scales
+
+from mgelens.atomic import write_fits
 
 logger = logging.getLogger(__name__)
 
@@ -585,10 +586,4 @@ def _write_fits_image(path: Path, image: np.ndarray, pixel_scale: float, unit: s
     header = fits.Header([_exact_float_card(PIXSCALE_KEY, pixel_scale, "[arcsec/pixel]")])
     if unit:
         header["BUNIT"] = unit
-    temporary = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
-        with temporary.open("wb") as stream:
-            fits.PrimaryHDU(data=image, header=header).writeto(stream)
-        os.replace(temporary, path)
-    finally:
-        temporary.unlink(missing_ok=True)
+    write_fits(path, fits.PrimaryHDU(data=image, header=header))

@@ -1,0 +1,1 @@
+"""Subcommands of the ``mgelens`` CLI: one module each, exposing ``register(subparsers)``."""
