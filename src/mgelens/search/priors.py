@@ -1,0 +1,311 @@
+"""Priors of the non-linear search and prior passing between phases (SPEC §2.4, §3, §8.2).
+
+A prior maps the unit cube onto a parameter: ``transform(u)`` is its inverse cumulative
+distribution function, vectorised over numpy arrays, which is what nested samplers need.
+Every prior has ``lower`` and ``upper`` support limits (±inf where unbounded), a
+``log_prob`` and a JSON form (``to_dict`` / :func:`prior_from_dict`) for result files.
+
+Prior passing (:func:`passed_prior`) replaces a prior by a Gaussian centred on the previous
+phase's posterior median and truncated to the parameter's physical limits.
+"""
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from scipy import special
+
+PassingRule = Literal["paper", "2024"]
+
+_LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+def _check_finite(**values: float) -> None:
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise ValueError(f"{name} must be finite, got {value}")
+
+
+def _check_ordered(lower: float, upper: float) -> None:
+    if math.isnan(lower) or math.isnan(upper) or not lower < upper:
+        raise ValueError(f"prior bounds must satisfy lower < upper, got ({lower}, {upper})")
+
+
+def _check_width(sigma: float) -> None:
+    if not (math.isfinite(sigma) and sigma > 0.0):
+        raise ValueError(f"sigma must be finite and positive, got {sigma}")
+
+
+def _bound_to_json(value: float) -> float | None:
+    """JSON has no infinity: an unbounded side is written as ``null``."""
+    return value if math.isfinite(value) else None
+
+
+def _bound_from_json(value: float | None, infinity: float) -> float:
+    return infinity if value is None else float(value)
+
+
+@dataclass(frozen=True)
+class Uniform:
+    """Uniform prior on [lower, upper] (both finite)."""
+
+    lower: float
+    upper: float
+
+    def __post_init__(self):
+        _check_finite(lower=self.lower, upper=self.upper)
+        _check_ordered(self.lower, self.upper)
+
+    def transform(self, u: np.ndarray | float) -> np.ndarray:
+        """Value at unit-cube coordinate ``u``: lower + u (upper − lower)."""
+        return self.lower + np.asarray(u, dtype=float) * (self.upper - self.lower)
+
+    def log_prob(self, x: np.ndarray | float) -> np.ndarray:
+        """Log density: −ln(upper − lower) inside the support, −inf outside."""
+        x = np.asarray(x, dtype=float)
+        inside = (x >= self.lower) & (x <= self.upper)
+        return np.where(inside, -math.log(self.upper - self.lower), -np.inf)
+
+    def to_dict(self) -> dict:
+        return {"type": "Uniform", "lower": self.lower, "upper": self.upper}
+
+
+@dataclass(frozen=True)
+class LogUniform:
+    """Prior uniform in ln x on [lower, upper], 0 < lower < upper < inf (density ∝ 1/x)."""
+
+    lower: float
+    upper: float
+
+    def __post_init__(self):
+        _check_finite(lower=self.lower, upper=self.upper)
+        _check_ordered(self.lower, self.upper)
+        if self.lower <= 0.0:
+            raise ValueError(f"LogUniform needs lower > 0, got {self.lower}")
+
+    def transform(self, u: np.ndarray | float) -> np.ndarray:
+        """Value at unit-cube coordinate ``u``: lower · (upper/lower)^u."""
+        log_lower = math.log(self.lower)
+        log_range = math.log(self.upper) - log_lower
+        return np.exp(log_lower + np.asarray(u, dtype=float) * log_range)
+
+    def log_prob(self, x: np.ndarray | float) -> np.ndarray:
+        """Log density −ln x − ln ln(upper/lower) inside the support, −inf outside."""
+        x = np.asarray(x, dtype=float)
+        inside = (x >= self.lower) & (x <= self.upper)
+        norm = math.log(math.log(self.upper / self.lower))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(inside, -np.log(x) - norm, -np.inf)
+
+    def to_dict(self) -> dict:
+        return {"type": "LogUniform", "lower": self.lower, "upper": self.upper}
+
+
+@dataclass(frozen=True)
+class Gaussian:
+    """Normal prior N(mean, sigma²) on the whole real line."""
+
+    mean: float
+    sigma: float
+
+    def __post_init__(self):
+        _check_finite(mean=self.mean)
+        _check_width(self.sigma)
+
+    @property
+    def lower(self) -> float:
+        return -math.inf
+
+    @property
+    def upper(self) -> float:
+        return math.inf
+
+    def transform(self, u: np.ndarray | float) -> np.ndarray:
+        """Value at unit-cube coordinate ``u``: mean + sigma Φ⁻¹(u)."""
+        return self.mean + self.sigma * special.ndtri(np.asarray(u, dtype=float))
+
+    def log_prob(self, x: np.ndarray | float) -> np.ndarray:
+        z = (np.asarray(x, dtype=float) - self.mean) / self.sigma
+        return -0.5 * z**2 - _LOG_SQRT_2PI - math.log(self.sigma)
+
+    def to_dict(self) -> dict:
+        return {"type": "Gaussian", "mean": self.mean, "sigma": self.sigma}
+
+
+@dataclass(frozen=True)
+class TruncatedGaussian:
+    """Normal prior N(mean, sigma²) truncated to [lower, upper] (either side may be ±inf).
+
+    The inverse CDF stays accurate far in the tails: with the standardised limits
+    a = (lower − mean)/sigma, b = (upper − mean)/sigma, the quantile z of u satisfies both
+    Φ(z) = (1 − u) Φ(a) + u Φ(b) and Φ(−z) = (1 − u) Φ(−a) + u Φ(−b). Both right-hand sides
+    are sums of positive terms, evaluated in log space (``scipy.special.log_ndtr``); z comes
+    from the first where Φ(z) < ½ and from the second otherwise (``ndtri_exp``).
+    """
+
+    mean: float
+    sigma: float
+    lower: float
+    upper: float
+
+    def __post_init__(self):
+        _check_finite(mean=self.mean)
+        _check_width(self.sigma)
+        _check_ordered(self.lower, self.upper)
+
+    @property
+    def _standard_limits(self) -> tuple[float, float]:
+        return (self.lower - self.mean) / self.sigma, (self.upper - self.mean) / self.sigma
+
+    def transform(self, u: np.ndarray | float) -> np.ndarray:
+        """Value at unit-cube coordinate ``u`` (u = 0 → lower, u = 1 → upper)."""
+        u = np.asarray(u, dtype=float)
+        a, b = self._standard_limits
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_u, log_complement = np.log(u), np.log1p(-u)
+            log_cdf = np.logaddexp(
+                log_complement + special.log_ndtr(a), log_u + special.log_ndtr(b)
+            )
+            log_sf = np.logaddexp(
+                log_complement + special.log_ndtr(-a), log_u + special.log_ndtr(-b)
+            )
+            z = np.where(
+                log_cdf < math.log(0.5), special.ndtri_exp(log_cdf), -special.ndtri_exp(log_sf)
+            )
+        x = np.clip(self.mean + self.sigma * z, self.lower, self.upper)
+        return np.where(u <= 0.0, self.lower, np.where(u >= 1.0, self.upper, x))
+
+    def log_normalisation(self) -> float:
+        """ln[Φ(b) − Φ(a)], the log prior mass of the untruncated Gaussian inside the limits."""
+        a, b = self._standard_limits
+        if a > 0.0:
+            log_hi, log_lo = special.log_ndtr(-a), special.log_ndtr(-b)
+        else:
+            log_hi, log_lo = special.log_ndtr(b), special.log_ndtr(a)
+        return float(log_hi + np.log(-np.expm1(log_lo - log_hi)))
+
+    def log_prob(self, x: np.ndarray | float) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        z = (x - self.mean) / self.sigma
+        density = -0.5 * z**2 - _LOG_SQRT_2PI - math.log(self.sigma) - self.log_normalisation()
+        inside = (x >= self.lower) & (x <= self.upper)
+        return np.where(inside, density, -np.inf)
+
+    def to_dict(self) -> dict:
+        return {
+            "type": "TruncatedGaussian",
+            "mean": self.mean,
+            "sigma": self.sigma,
+            "lower": _bound_to_json(self.lower),
+            "upper": _bound_to_json(self.upper),
+        }
+
+
+Prior = Uniform | LogUniform | Gaussian | TruncatedGaussian
+
+
+def prior_from_dict(content: dict) -> Prior:
+    """Inverse of ``prior.to_dict()``."""
+    kind = content.get("type")
+    if kind == "Uniform":
+        return Uniform(float(content["lower"]), float(content["upper"]))
+    if kind == "LogUniform":
+        return LogUniform(float(content["lower"]), float(content["upper"]))
+    if kind == "Gaussian":
+        return Gaussian(float(content["mean"]), float(content["sigma"]))
+    if kind == "TruncatedGaussian":
+        return TruncatedGaussian(
+            float(content["mean"]),
+            float(content["sigma"]),
+            _bound_from_json(content["lower"], -math.inf),
+            _bound_from_json(content["upper"], math.inf),
+        )
+    raise ValueError(f"unknown prior type {kind!r} in {content}")
+
+
+@dataclass(frozen=True)
+class WidthModifier:
+    """Minimum width of a passed prior (SPEC §8.2).
+
+    ``kind == "absolute"``: width = value (parameter units);
+    ``kind == "relative"``: width = value × |posterior median|.
+    """
+
+    kind: Literal["absolute", "relative"]
+    value: float
+
+    def width(self, median: float) -> float:
+        return self.value if self.kind == "absolute" else self.value * abs(median)
+
+
+_CENTRE = WidthModifier("absolute", 0.05)
+_ELL_COMPS = WidthModifier("absolute", 0.2)
+_SHEAR = WidthModifier("absolute", 0.05)
+_RELATIVE_HALF = WidthModifier("relative", 0.5)
+WIDTH_MODIFIERS: dict[str, WidthModifier] = {
+    "centre_x": _CENTRE,
+    "centre_y": _CENTRE,
+    "ell_comps_1": _ELL_COMPS,
+    "ell_comps_2": _ELL_COMPS,
+    "einstein_radius": WidthModifier("relative", 0.25),
+    "slope": WidthModifier("absolute", 0.2),
+    "gamma_1": _SHEAR,
+    "gamma_2": _SHEAR,
+}
+"""Width modifiers keyed by the last component of a dotted parameter name (SPEC §8.2).
+
+Regularization coefficients (names ending in ``coefficient``) and every other parameter
+use the default, relative 0.5."""
+
+
+def width_modifier(name: str) -> WidthModifier:
+    """Width modifier of the parameter with dotted ``name`` (matched on its last component)."""
+    return WIDTH_MODIFIERS.get(name.rsplit(".", 1)[-1], _RELATIVE_HALF)
+
+
+def passed_prior(
+    name: str,
+    previous_median: float,
+    previous_sigma: float,
+    limits: tuple[float, float] = (-math.inf, math.inf),
+    rule: PassingRule = "paper",
+) -> TruncatedGaussian:
+    """Prior for ``name`` passed from a previous phase's posterior (SPEC §8.2).
+
+    Parameters
+    ----------
+    name : str
+        Dotted parameter name; its last component selects the width modifier w
+        (:data:`WIDTH_MODIFIERS`).
+    previous_median : float
+        Posterior median μ of the previous phase (parameter units).
+    previous_sigma : float
+        Half-width of the previous 3σ (99.73 %) credible interval,
+        max(upper − μ, μ − lower) (parameter units); 0 for a parameter that was fixed.
+    limits : (float, float)
+        Physical limits of the parameter; the Gaussian is truncated to them.
+    rule : {"paper", "2024"}
+        ``"paper"`` (anchor 2023, default): σ_p = max(previous_sigma, w);
+        ``"2024"``: σ_p = w.
+
+    Returns
+    -------
+    TruncatedGaussian
+        N(μ, σ_p²) truncated to ``limits``.
+    """
+    if rule not in ("paper", "2024"):
+        raise ValueError(f"rule must be 'paper' or '2024', got {rule!r}")
+    if not previous_sigma >= 0.0:
+        raise ValueError(f"previous_sigma must be >= 0, got {previous_sigma} for {name}")
+    width = width_modifier(name).width(previous_median)
+    sigma = max(previous_sigma, width) if rule == "paper" else width
+    if not sigma > 0.0:
+        raise ValueError(
+            f"passed prior of {name} has zero width (median {previous_median}, "
+            f"3σ half-width {previous_sigma}, rule {rule!r}): give it an explicit prior"
+        )
+    lower, upper = limits
+    if not lower <= previous_median <= upper:
+        raise ValueError(f"median {previous_median} of {name} lies outside its limits {limits}")
+    return TruncatedGaussian(previous_median, sigma, lower, upper)

@@ -1,0 +1,711 @@
+"""Nested sampling of a :class:`~mgelens.search.model.ParameterSpace` (SPEC §8.3, §8.4).
+
+:func:`run_nested` wraps dynesty's static (``NestedSampler``) and dynamic
+(``DynamicNestedSampler``) samplers, and nautilus when it is installed
+(``pip install nautilus-sampler``; optional). It adds what long fits on clusters need:
+
+* **Reproducibility**: a fixed seed (``rstate=np.random.default_rng(seed)`` for dynesty,
+  ``seed=`` for nautilus).
+* **Checkpoint and automatic resume** (dynesty): dynesty writes its checkpoint every
+  ``checkpoint_every`` seconds (itself through a temporary file and a rename). If the file
+  exists when :func:`run_nested` starts, the sampler is restored from it (RNG state
+  included) and continues, so an interrupted run finishes with the same samples and log
+  evidence as an uninterrupted one. The checkpoint carries a fingerprint of the parameter
+  space, the settings and the seed; a mismatch raises :class:`CheckpointMismatchError`
+  instead of silently continuing a different fit. The checkpoint is **kept** after a
+  successful run: calling :func:`run_nested` again returns the stored run without sampling.
+  Callers delete it once their result files are written if they want the space back.
+  Nautilus checkpoints to ``<checkpoint stem>.h5`` when ``h5py`` is importable.
+* **Quiet progress**: no progress bar; one line every ``progress_every`` seconds through
+  ``log`` (default: the ``mgelens.search`` logger at INFO level).
+* **Parallel likelihoods**: ``n_processes > 1`` runs a ``multiprocessing`` pool ("spawn"
+  start method). The likelihood and the parameter space are sent once to each worker at
+  start-up; neither dynesty's tasks nor its checkpoint carry them (only the names of the
+  module-level functions below), so a large dataset is never pickled per call. The
+  likelihood must therefore be picklable when ``n_processes > 1``.
+* **Rejected samples** (SPEC §8.4): the likelihood returns ``REJECTED_LOG_LIKELIHOOD``
+  (−1e99) for a sample that cannot be fitted; −inf and anything below −1e99 count the same.
+  Calls and rejections are counted in shared memory (right with a pool) and stored in the
+  checkpoint, so the counts survive a resume.
+
+One :func:`run_nested` runs at a time per process (the module holds the evaluation that
+dynesty's module-level callables forward to).
+"""
+
+import contextlib
+import json
+import logging
+import math
+import multiprocessing
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import dynesty
+import dynesty.utils
+import numpy as np
+from scipy import special
+
+from mgelens.atomic import atomic_path, write_json
+from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
+from mgelens.search.model import ParameterSpace
+
+LOGGER = logging.getLogger("mgelens.search")
+METHODS = ("dynesty_static", "dynesty_dynamic", "nautilus")
+_MULTIPROCESSING = multiprocessing.get_context("spawn")
+_STATE_ATTRIBUTE = "mgelens_state"
+
+
+class CheckpointMismatchError(ValueError):
+    """A checkpoint belongs to a different parameter space, settings or seed."""
+
+
+@dataclass(frozen=True)
+class SamplerSettings:
+    """Settings of the non-linear search (defaults: SPEC §8.3, anchor ``nest.yaml``).
+
+    Attributes
+    ----------
+    method : {"dynesty_static", "dynesty_dynamic", "nautilus"}
+    n_live : int
+        Live points (dynesty ``nlive``; for the dynamic sampler both the baseline and the
+        batches; nautilus ``n_live``).
+    dlogz : float or None
+        dynesty stopping criterion on the remaining log evidence; ``None`` uses dynesty's
+        default (static: 1e-3 (n_live − 1) + 0.01; dynamic baseline: 0.01).
+    bound, sample : str
+        dynesty bounding and sampling methods. ``sample="auto"`` is resolved here with
+        dynesty's rule (unif below 10 dimensions, rwalk up to 20, rslice above) so that
+        ``walks``/``slices`` below apply (dynesty 3.1's own "auto" ignores them).
+    walks, slices : int
+        Steps of the rwalk sampler and slice updates of the (r)slice samplers.
+    facc : float
+        Target acceptance fraction of rwalk.
+    n_effective : int or None
+        Dynamic sampler: target effective sample size (dynesty default if ``None``).
+    enlarge_per_dim, split_threshold, n_networks, n_batch, f_live, n_shell, n_eff, \
+discard_exploration
+        Nautilus settings (SPEC §8.3).
+    checkpoint_every : float
+        Seconds between checkpoints (dynesty).
+    progress_every : float
+        Seconds between progress lines.
+    n_processes : int
+        Likelihood processes; 1 = no pool.
+    queue_size : int or None
+        dynesty proposals evaluated in parallel (default: ``n_processes``).
+
+    The fields from ``checkpoint_every`` on change only how a run is executed, not its
+    result (except that a pool changes dynesty's random stream through ``queue_size``).
+    """
+
+    method: str = "dynesty_static"
+    n_live: int = 200
+    dlogz: float | None = None
+    bound: str = "multi"
+    sample: str = "auto"
+    walks: int = 5
+    slices: int = 5
+    facc: float = 0.2
+    n_effective: int | None = None
+    enlarge_per_dim: float = 1.1
+    split_threshold: float = 100.0
+    n_networks: int = 4
+    n_batch: int = 100
+    f_live: float = 0.01
+    n_shell: int = 1
+    n_eff: int = 500
+    discard_exploration: bool = False
+    checkpoint_every: float = 60.0
+    progress_every: float = 60.0
+    n_processes: int = 1
+    queue_size: int | None = None
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+        if self.n_live < 2:
+            raise ValueError(f"n_live must be at least 2, got {self.n_live}")
+        if self.n_processes < 1:
+            raise ValueError(f"n_processes must be at least 1, got {self.n_processes}")
+        if self.checkpoint_every < 0 or self.progress_every < 0:
+            raise ValueError("checkpoint_every and progress_every must be >= 0 seconds")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, content: dict) -> "SamplerSettings":
+        known = {f.name for f in fields(cls)}
+        unknown = set(content) - known
+        if unknown:
+            raise ValueError(f"unknown sampler settings {sorted(unknown)}; known: {sorted(known)}")
+        return cls(**content)
+
+    def result_settings(self) -> dict:
+        """The settings that determine the result (all but the execution fields)."""
+        execution = ("checkpoint_every", "progress_every", "n_processes")
+        return {k: v for k, v in self.to_dict().items() if k not in execution}
+
+
+SIGMA_PROBABILITY = {1: math.erf(1.0 / math.sqrt(2.0)), 3: math.erf(3.0 / math.sqrt(2.0))}
+"""Central credible-interval probabilities: 1σ = 68.27 %, 3σ = 99.73 %."""
+
+
+def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float | np.ndarray) -> np.ndarray:
+    """Weighted quantiles along axis 0 (inverted-CDF definition).
+
+    The q-quantile is the smallest sample value whose cumulative normalised weight
+    reaches q (numpy's ``method="inverted_cdf"`` with weights); it is always a sample
+    with non-zero weight.
+
+    Parameters
+    ----------
+    values : ndarray, shape (n,) or (n, m)
+    weights : ndarray, shape (n,)
+        Non-negative weights, not necessarily normalised.
+    q : float or ndarray
+        Probabilities in [0, 1].
+
+    Returns
+    -------
+    ndarray, shape ``np.shape(q) + values.shape[1:]``
+    """
+    values = np.asarray(values, dtype=float)
+    weights = np.asarray(weights, dtype=float)
+    if weights.shape != values.shape[:1] or np.any(weights < 0) or not weights.sum() > 0:
+        raise ValueError("weights must be non-negative, one per sample, with a positive sum")
+    q = np.asarray(q, dtype=float)
+    columns = values.reshape(len(values), -1)
+    out = np.empty((q.size, columns.shape[1]))
+    for j, column in enumerate(columns.T):
+        order = np.argsort(column, kind="stable")
+        cumulative = np.cumsum(weights[order])
+        cumulative /= cumulative[-1]
+        index = np.minimum(np.searchsorted(cumulative, q.ravel(), side="left"), len(column) - 1)
+        out[:, j] = column[order][index]
+    return out.reshape(q.shape + values.shape[1:])
+
+
+def credible_interval(
+    values: np.ndarray, weights: np.ndarray, sigma: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Central credible interval holding erf(sigma/√2) of the weight (1σ: 68.27 %)."""
+    probability = math.erf(sigma / math.sqrt(2.0))
+    lower, upper = weighted_quantile(
+        values, weights, [(1 - probability) / 2, (1 + probability) / 2]
+    )
+    return lower, upper
+
+
+@dataclass(frozen=True, eq=False)
+class SamplerOutput:
+    """Weighted posterior samples and run statistics of one nested-sampling run.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Free-parameter names (columns of ``samples``).
+    samples : ndarray, shape (n, n_free)
+        Parameter values (parameter units).
+    log_weights : ndarray, shape (n,)
+        Natural-log posterior weights, normalised so that Σ exp = 1.
+    log_likelihoods : ndarray, shape (n,)
+        ln L of each sample (rejected samples: −1e99).
+    log_evidence, log_evidence_error : float
+        ln Z and its error (dynesty's estimate; nautilus: sqrt(1/N_eff − 1/N) from the
+        importance weights).
+    n_calls, n_rejected : int
+        Likelihood calls and rejected samples, over all sessions of a resumed run.
+    runtime : float
+        Wall-clock seconds spent sampling, over all sessions (nautilus: this session).
+    n_resumes : int
+        How many times the run was resumed from its checkpoint (nautilus: always 0).
+    method : str
+    settings : dict
+        :meth:`SamplerSettings.to_dict` of the run.
+    seed : int
+    """
+
+    names: tuple[str, ...]
+    samples: np.ndarray
+    log_weights: np.ndarray
+    log_likelihoods: np.ndarray
+    log_evidence: float
+    log_evidence_error: float
+    n_calls: int
+    n_rejected: int
+    runtime: float
+    n_resumes: int
+    method: str
+    settings: dict
+    seed: int
+
+    def __post_init__(self):
+        samples = np.asarray(self.samples, dtype=float).reshape(-1, len(self.names))
+        object.__setattr__(self, "names", tuple(self.names))
+        object.__setattr__(self, "samples", samples)
+        for name in ("log_weights", "log_likelihoods"):
+            array = np.asarray(getattr(self, name), dtype=float)
+            if array.shape != samples.shape[:1]:
+                raise ValueError(f"{name} has shape {array.shape}, expected ({len(samples)},)")
+            object.__setattr__(self, name, array)
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, SamplerOutput):
+            return NotImplemented
+        return all(
+            np.array_equal(getattr(self, f.name), getattr(other, f.name))
+            if isinstance(getattr(self, f.name), np.ndarray)
+            else getattr(self, f.name) == getattr(other, f.name)
+            for f in fields(self)
+        )
+
+    __hash__ = None
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Posterior weights, summing to 1."""
+        weights = np.exp(self.log_weights - self.log_weights.max())
+        return weights / weights.sum()
+
+    @property
+    def effective_sample_size(self) -> float:
+        """Kish effective sample size (Σw)²/Σw²."""
+        return float(1.0 / np.sum(self.weights**2))
+
+    def median(self) -> np.ndarray:
+        """Weighted posterior median of every free parameter, shape (n_free,)."""
+        return weighted_quantile(self.samples, self.weights, 0.5)
+
+    def credible_interval(self, sigma: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of the central interval with probability erf(sigma/√2)."""
+        return credible_interval(self.samples, self.weights, sigma)
+
+    @property
+    def max_likelihood_index(self) -> int:
+        return int(np.argmax(self.log_likelihoods))
+
+    def max_likelihood(self) -> np.ndarray:
+        """Free-parameter vector of the highest-likelihood sample."""
+        return self.samples[self.max_likelihood_index].copy()
+
+    def statistics(self) -> dict:
+        """Scalar run statistics for result files."""
+        return {
+            "method": self.method,
+            "log_evidence": self.log_evidence,
+            "log_evidence_error": self.log_evidence_error,
+            "max_log_likelihood": float(self.log_likelihoods.max()),
+            "n_samples": len(self.samples),
+            "effective_sample_size": self.effective_sample_size,
+            "n_calls": self.n_calls,
+            "n_rejected": self.n_rejected,
+            "runtime_s": self.runtime,
+            "n_resumes": self.n_resumes,
+            "seed": self.seed,
+            "settings": self.settings,
+        }
+
+
+# -- evaluation inside the sampler (main process and pool workers) ------------------------
+@dataclass(frozen=True)
+class _Evaluation:
+    """What the module-level callables evaluate: likelihood, space and shared counters."""
+
+    log_likelihood: Callable[[np.ndarray], float]
+    space: ParameterSpace
+    counts: object  # multiprocessing Array('q', 2): [calls, rejected]
+
+    def counted(self, x: np.ndarray) -> float:
+        value = float(self.log_likelihood(x))
+        if math.isnan(value) or value == math.inf:
+            raise FloatingPointError(
+                f"log likelihood is {value} at {self.space.values(x)}; "
+                f"return {REJECTED_LOG_LIKELIHOOD} to reject a sample"
+            )
+        rejected = value <= REJECTED_LOG_LIKELIHOOD
+        with self.counts.get_lock():
+            self.counts[0] += 1
+            self.counts[1] += int(rejected)
+        return REJECTED_LOG_LIKELIHOOD if rejected else value
+
+
+_current: list[_Evaluation] = []
+
+
+def _install(evaluation: _Evaluation | None) -> None:
+    """Make ``evaluation`` the one the callables below use (pool-worker initializer)."""
+    _current[:] = [] if evaluation is None else [evaluation]
+
+
+def _prior_transform(u: np.ndarray) -> np.ndarray:
+    return _current[0].space.prior_transform(u)
+
+
+def _log_likelihood(x: np.ndarray) -> float:
+    return _current[0].counted(x)
+
+
+def _log_likelihood_nautilus(x: np.ndarray) -> float:
+    """Nautilus takes −inf (not −1e99) for a rejected sample."""
+    value = _current[0].counted(x)
+    return -math.inf if value <= REJECTED_LOG_LIKELIHOOD else value
+
+
+@contextlib.contextmanager
+def _evaluating(evaluation: _Evaluation, n_processes: int) -> Iterator[object | None]:
+    """Install ``evaluation`` here and, for ``n_processes > 1``, in a pool it yields."""
+    if _current:
+        raise RuntimeError("run_nested is already running in this process")
+    _install(evaluation)
+    try:
+        if n_processes == 1:
+            yield None
+        else:
+            with _MULTIPROCESSING.Pool(n_processes, _install, (evaluation,)) as pool:
+                yield pool
+    finally:
+        _install(None)
+
+
+# -- checkpoint bookkeeping ----------------------------------------------------------------
+class _RunState:
+    """Counters and fingerprint carried inside dynesty's checkpoint.
+
+    It sits on the sampler as an attribute and pickles as a plain ``dict`` snapshot taken
+    when dynesty writes the checkpoint, so the counts always match the stored state.
+    """
+
+    def __init__(self, fingerprint: dict, counts, runtime_before: float, n_resumes: int):
+        self.fingerprint = fingerprint
+        self.counts = counts
+        self.runtime_before = runtime_before
+        self.n_resumes = n_resumes
+        self.started = time.perf_counter()
+
+    @property
+    def runtime(self) -> float:
+        return self.runtime_before + time.perf_counter() - self.started
+
+    def snapshot(self, finished: bool = False) -> dict:
+        return {
+            "fingerprint": self.fingerprint,
+            "n_calls": int(self.counts[0]),
+            "n_rejected": int(self.counts[1]),
+            "runtime": self.runtime,
+            "n_resumes": self.n_resumes,
+            "finished": finished,
+        }
+
+    def __reduce__(self):
+        return dict, (self.snapshot(),)
+
+
+def _fingerprint(space: ParameterSpace, settings: SamplerSettings, seed: int) -> dict:
+    content = {"space": space.to_dict(), "settings": settings.result_settings(), "seed": seed}
+    return json.loads(json.dumps(content))
+
+
+def _check_fingerprint(path: Path, stored: dict, expected: dict) -> None:
+    if stored != expected:
+        differing = sorted(k for k in expected if stored.get(k) != expected.get(k))
+        raise CheckpointMismatchError(
+            f"checkpoint {path} was written for a different {', '.join(differing)}; "
+            "delete it to start afresh, or rerun with the original settings"
+        )
+
+
+class _ProgressLine:
+    """dynesty ``print_func``: one log line at most every ``every`` seconds."""
+
+    def __init__(self, log: Callable[[str], None], every: float, state: _RunState, method: str):
+        self.log, self.every, self.state, self.method = log, every, state, method
+        self.last: float | None = None
+
+    def __call__(self, result, niter, ncall, dlogz=None, stop_val=None, nbatch=None, **_):
+        now = time.perf_counter()
+        if self.last is not None and now - self.last < self.every:
+            return
+        self.last = now
+        parts = [f"{self.method}: iteration {niter}"]
+        if nbatch:
+            parts.append(f"batch {nbatch}")
+        parts.append(f"{int(self.state.counts[0])} calls ({int(self.state.counts[1])} rejected)")
+        logz, logzvar = getattr(result, "logz", None), getattr(result, "logzvar", None)
+        if logz is not None and logzvar is not None:
+            parts.append(f"ln Z = {logz:.6g} ± {math.sqrt(max(logzvar, 0.0)):.3g}")
+        delta = getattr(result, "delta_logz", None)
+        if delta is not None and dlogz is not None and math.isfinite(delta):
+            parts.append(f"Δln Z = {delta:.3g} (stop < {dlogz:.3g})")
+        elif stop_val is not None:
+            parts.append(f"stop value {stop_val:.3g}")
+        loglstar = getattr(result, "loglstar", None)
+        if loglstar is not None:
+            parts.append(f"ln L* = {loglstar:.6g}")
+        parts.append(f"{self.state.runtime:.0f} s")
+        self.log(", ".join(parts))
+
+
+# -- dynesty -------------------------------------------------------------------------------
+def resolve_sample_method(sample: str, n_dim: int) -> str:
+    """dynesty sampling method, with "auto" resolved by dimension (see SamplerSettings)."""
+    if sample != "auto":
+        return sample
+    if n_dim < 10:
+        return "unif"
+    return "rwalk" if n_dim <= 20 else "rslice"
+
+
+def _new_dynesty_sampler(settings: SamplerSettings, n_dim: int, seed: int, pool):
+    sample = resolve_sample_method(settings.sample, n_dim)
+    options = {"nlive": settings.n_live, "bound": settings.bound, "sample": sample}
+    options["facc"] = settings.facc
+    if sample == "rwalk":
+        options["walks"] = settings.walks
+    elif sample in ("slice", "rslice"):
+        options["slices"] = settings.slices
+    if pool is not None:
+        options.update(pool=pool, queue_size=settings.queue_size or settings.n_processes)
+    factory = (
+        dynesty.DynamicNestedSampler
+        if settings.method == "dynesty_dynamic"
+        else dynesty.NestedSampler
+    )
+    return factory(
+        _log_likelihood, _prior_transform, n_dim, rstate=np.random.default_rng(seed), **options
+    )
+
+
+def _run_dynesty(sampler, settings: SamplerSettings, progress, checkpoint: str | None, resume):
+    common = {
+        "print_progress": True,
+        "print_func": progress,
+        "checkpoint_file": checkpoint,
+        "checkpoint_every": settings.checkpoint_every,
+        "resume": resume,
+    }
+    if settings.method == "dynesty_dynamic":
+        sampler.run_nested(
+            nlive_init=settings.n_live,
+            nlive_batch=settings.n_live,
+            dlogz_init=0.01 if settings.dlogz is None else settings.dlogz,
+            n_effective=settings.n_effective,
+            **common,
+        )
+    else:
+        sampler.run_nested(dlogz=settings.dlogz, **common)
+
+
+def _save_dynesty(sampler, path: Path) -> None:
+    with atomic_path(path) as temporary:
+        dynesty.utils.save_sampler(sampler, str(temporary))
+
+
+def _sample_dynesty(
+    evaluation: _Evaluation,
+    settings: SamplerSettings,
+    checkpoint_path: Path | None,
+    seed: int,
+    log: Callable[[str], None],
+) -> SamplerOutput:
+    space = evaluation.space
+    fingerprint = _fingerprint(space, settings, seed)
+    with _evaluating(evaluation, settings.n_processes) as pool:
+        stored = {"n_calls": 0, "n_rejected": 0, "runtime": 0.0, "n_resumes": -1}
+        resume = checkpoint_path is not None and checkpoint_path.exists()
+        if resume:
+            sampler = dynesty.utils.restore_sampler(str(checkpoint_path), pool=pool)
+            stored = getattr(sampler, _STATE_ATTRIBUTE, None)
+            if stored is None:
+                raise CheckpointMismatchError(
+                    f"checkpoint {checkpoint_path} was not written by mgelens: delete it"
+                )
+            _check_fingerprint(checkpoint_path, stored["fingerprint"], fingerprint)
+            evaluation.counts[:] = [stored["n_calls"], stored["n_rejected"]]
+            log(
+                f"{settings.method}: resuming from {checkpoint_path} "
+                f"({stored['n_calls']} calls so far)"
+            )
+        else:
+            sampler = _new_dynesty_sampler(settings, space.n_free, seed, pool)
+            log(f"{settings.method}: {space.n_free} free parameters, seed {seed}")
+        if stored.get("finished", False):
+            final = stored
+        else:
+            state = _RunState(
+                fingerprint, evaluation.counts, stored["runtime"], stored["n_resumes"] + 1
+            )
+            setattr(sampler, _STATE_ATTRIBUTE, state)
+            progress = _ProgressLine(log, settings.progress_every, state, settings.method)
+            checkpoint = None if checkpoint_path is None else str(checkpoint_path)
+            _run_dynesty(sampler, settings, progress, checkpoint, resume)
+            final = state.snapshot(finished=True)
+            if checkpoint_path is not None:
+                setattr(sampler, _STATE_ATTRIBUTE, final)
+                _save_dynesty(sampler, checkpoint_path)
+        results = sampler.results
+    log_weights = results["logwt"] - special.logsumexp(results["logwt"])
+    output = SamplerOutput(
+        names=space.free_names,
+        samples=results["samples"],
+        log_weights=log_weights,
+        log_likelihoods=results["logl"],
+        log_evidence=float(results["logz"][-1]),
+        log_evidence_error=float(results["logzerr"][-1]),
+        n_calls=final["n_calls"],
+        n_rejected=final["n_rejected"],
+        runtime=final["runtime"],
+        n_resumes=final["n_resumes"],
+        method=settings.method,
+        settings=settings.to_dict(),
+        seed=seed,
+    )
+    log(_summary_line(output))
+    return output
+
+
+# -- nautilus ------------------------------------------------------------------------------
+def _nautilus_checkpoint(checkpoint_path: Path | None, log) -> Path | None:
+    if checkpoint_path is None:
+        return None
+    try:
+        import h5py  # noqa: F401  (nautilus needs it to write checkpoints)
+    except ImportError:
+        log("nautilus: h5py is not installed, running without a checkpoint")
+        return None
+    return checkpoint_path.with_suffix(".h5")
+
+
+def _sample_nautilus(
+    evaluation: _Evaluation,
+    settings: SamplerSettings,
+    checkpoint_path: Path | None,
+    seed: int,
+    log: Callable[[str], None],
+) -> SamplerOutput:
+    try:
+        import nautilus
+    except ImportError as error:
+        raise ImportError(
+            "method='nautilus' needs the optional package nautilus-sampler "
+            "(pip install nautilus-sampler)"
+        ) from error
+    space = evaluation.space
+    filepath = _nautilus_checkpoint(checkpoint_path, log)
+    if filepath is not None:
+        fingerprint_path = filepath.with_suffix(".fingerprint.json")
+        fingerprint = _fingerprint(space, settings, seed)
+        if filepath.exists() and fingerprint_path.exists():
+            stored = json.loads(fingerprint_path.read_text())
+            _check_fingerprint(filepath, stored, fingerprint)
+        write_json(fingerprint_path, fingerprint)
+    started = time.perf_counter()
+    with _evaluating(evaluation, settings.n_processes) as pool:
+        sampler = nautilus.Sampler(
+            _prior_transform,
+            _log_likelihood_nautilus,
+            n_dim=space.n_free,
+            n_live=settings.n_live,
+            enlarge_per_dim=settings.enlarge_per_dim,
+            split_threshold=settings.split_threshold,
+            n_networks=settings.n_networks,
+            n_batch=settings.n_batch,
+            pool=pool,
+            seed=seed,
+            filepath=filepath,
+            resume=True,
+        )
+        log(f"nautilus: {space.n_free} free parameters, seed {seed}, {sampler.n_like} calls so far")
+        while not sampler.run(
+            f_live=settings.f_live,
+            n_shell=settings.n_shell,
+            n_eff=settings.n_eff,
+            discard_exploration=settings.discard_exploration,
+            timeout=settings.progress_every,
+            verbose=False,
+        ):
+            log(
+                f"nautilus: {sampler.n_like} calls, N_eff = {sampler.n_eff:.0f}, "
+                f"ln Z = {sampler.log_z:.3f}, {time.perf_counter() - started:.0f} s"
+            )
+        points, log_w, log_l = sampler.posterior()
+        all_log_l = np.concatenate([np.asarray(v, dtype=float) for v in sampler.log_l])
+        n_calls = int(sampler.n_like)
+        log_evidence = float(sampler.log_z)
+    log_w = np.asarray(log_w, dtype=float)
+    log_weights = log_w - special.logsumexp(log_w)
+    n_eff = float(1.0 / np.sum(np.exp(2.0 * log_weights)))
+    output = SamplerOutput(
+        names=space.free_names,
+        samples=points,
+        log_weights=log_weights,
+        log_likelihoods=np.maximum(log_l, REJECTED_LOG_LIKELIHOOD),
+        log_evidence=log_evidence,
+        log_evidence_error=math.sqrt(max(1.0 / n_eff - 1.0 / len(log_w), 0.0)),
+        n_calls=n_calls,
+        n_rejected=int(np.sum(all_log_l == -math.inf)),
+        runtime=time.perf_counter() - started,
+        n_resumes=0,
+        method=settings.method,
+        settings=settings.to_dict(),
+        seed=seed,
+    )
+    log(_summary_line(output))
+    return output
+
+
+def _summary_line(output: SamplerOutput) -> str:
+    return (
+        f"{output.method}: done, ln Z = {output.log_evidence:.3f} ± "
+        f"{output.log_evidence_error:.3f}, {len(output.samples)} samples "
+        f"(N_eff = {output.effective_sample_size:.0f}), {output.n_calls} calls "
+        f"({output.n_rejected} rejected), {output.runtime:.1f} s"
+    )
+
+
+def run_nested(
+    log_likelihood: Callable[[np.ndarray], float],
+    space: ParameterSpace,
+    settings: SamplerSettings | None = None,
+    checkpoint_path: str | Path | None = None,
+    seed: int = 0,
+    log: Callable[[str], None] | None = None,
+) -> SamplerOutput:
+    """Sample the posterior of ``space`` under ``log_likelihood`` and estimate ln Z.
+
+    Parameters
+    ----------
+    log_likelihood : callable
+        ``log_likelihood(x) -> float`` for the free-parameter vector ``x`` (order of
+        ``space.free_names``; use ``space.values(x)`` for the full dictionary). Return
+        ``REJECTED_LOG_LIKELIHOOD`` (−1e99) to reject a sample. Must be picklable when
+        ``settings.n_processes > 1``.
+    space : ParameterSpace
+        Free parameters and their priors.
+    settings : SamplerSettings, optional
+        Sampler choice and settings (default ``SamplerSettings()``).
+    checkpoint_path : str or Path, optional
+        Checkpoint file (e.g. ``<phase folder>/sampler.pickle``); resumed automatically if
+        it exists, kept after the run. ``None``: no checkpoint.
+    seed : int
+        Seed of the sampler's random generator.
+    log : callable, optional
+        Receives progress lines (default: ``logging.getLogger("mgelens.search").info``).
+
+    Returns
+    -------
+    SamplerOutput
+    """
+    settings = SamplerSettings() if settings is None else settings
+    if space.n_free < 1:
+        raise ValueError("the parameter space has no free parameter")
+    log = LOGGER.info if log is None else log
+    checkpoint = None if checkpoint_path is None else Path(checkpoint_path)
+    if checkpoint is not None:
+        checkpoint.parent.mkdir(parents=True, exist_ok=True)
+    evaluation = _Evaluation(log_likelihood, space, _MULTIPROCESSING.Array("q", 2))
+    if settings.method == "nautilus":
+        return _sample_nautilus(evaluation, settings, checkpoint, seed, log)
+    return _sample_dynesty(evaluation, settings, checkpoint, seed, log)

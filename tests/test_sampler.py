@@ -1,0 +1,266 @@
+"""Nested sampling: evidence and posterior of a known Gaussian, rejections, resume, backends."""
+
+import math
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
+from mgelens.search.model import ParameterSpace
+from mgelens.search.priors import Uniform
+from mgelens.search.sampler import (
+    CheckpointMismatchError,
+    SamplerSettings,
+    resolve_sample_method,
+    run_nested,
+)
+
+MEAN = np.array([0.5, -0.3])
+SIGMA = np.array([0.2, 0.4])
+BOX = 5.0
+LOG_Z = -math.log((2 * BOX) ** 2)
+"""ln Z of a unit-normalised Gaussian likelihood under a uniform prior on [−5, 5]²: the
+Gaussian's mass inside the box is 1 − O(1e−30), so Z = 1/area."""
+
+SPACE = ParameterSpace.from_priors({"toy.x": Uniform(-BOX, BOX), "toy.y": Uniform(-BOX, BOX)})
+FAST = SamplerSettings(n_live=100, progress_every=1e9)
+ACCURATE = SamplerSettings(n_live=300, progress_every=1e9)
+
+
+class Interrupted(Exception):
+    """Stands for a wall-time kill in the middle of a run."""
+
+
+class GaussianLikelihood:
+    """Normalised 2-D Gaussian.
+
+    Optionally rejects x < ``reject_below`` (and leaves a marker file per rejection in
+    ``marker_folder``), or raises :class:`Interrupted` once it has been called more than
+    ``stop_after`` times and the file ``stop_once_exists`` exists.
+    """
+
+    def __init__(
+        self, reject_below=-math.inf, marker_folder=None, stop_after=None, stop_once_exists=None
+    ):
+        self.reject_below, self.marker_folder = reject_below, marker_folder
+        self.stop_after, self.stop_once_exists = stop_after, stop_once_exists
+        self.calls = self.rejected = 0
+
+    def __call__(self, x: np.ndarray) -> float:
+        self.calls += 1
+        if (
+            self.stop_after is not None
+            and self.calls > self.stop_after
+            and self.stop_once_exists.exists()
+        ):
+            raise Interrupted
+        if x[0] < self.reject_below:
+            self.rejected += 1
+            if self.marker_folder is not None:  # one file per rejection, from any process
+                (Path(self.marker_folder) / uuid.uuid4().hex).touch()
+            return REJECTED_LOG_LIKELIHOOD
+        z = (x - MEAN) / SIGMA
+        return float(-0.5 * z @ z - np.log(2 * np.pi * SIGMA.prod()))
+
+
+def failing_likelihood(x: np.ndarray) -> float:
+    raise AssertionError("a finished checkpoint must not call the likelihood")
+
+
+def posterior_moments(output):
+    weights = output.weights
+    mean = weights @ output.samples
+    std = np.sqrt(weights @ (output.samples - mean) ** 2)
+    return mean, std
+
+
+def assert_recovers_gaussian(output, tolerance=math.inf):
+    """ln Z within 3 reported errors (and ``tolerance``); posterior mean and width."""
+    error = output.log_evidence_error
+    assert abs(output.log_evidence - LOG_Z) < min(3 * error, tolerance)
+    mean, std = posterior_moments(output)
+    np.testing.assert_allclose(mean, MEAN, atol=0.1)
+    np.testing.assert_allclose(std, SIGMA, rtol=0.15)
+
+
+@pytest.fixture(scope="module")
+def static_run():
+    likelihood = GaussianLikelihood()
+    lines: list[str] = []
+    output = run_nested(likelihood, SPACE, ACCURATE, seed=11, log=lines.append)
+    return likelihood, output, lines
+
+
+def test_static_recovers_evidence_and_posterior(static_run):
+    likelihood, output, _ = static_run
+    assert_recovers_gaussian(output, tolerance=0.3)
+    assert output.samples.shape == (len(output.log_weights), 2)
+    assert output.weights.sum() == pytest.approx(1.0)
+    assert output.n_calls == likelihood.calls
+    assert output.n_rejected == 0
+    assert output.names == ("toy.x", "toy.y")
+    assert output.settings == ACCURATE.to_dict()
+    best = output.samples[np.argmax(output.log_likelihoods)]
+    np.testing.assert_array_equal(output.max_likelihood(), best)
+    lower, upper = output.credible_interval(1)
+    assert np.all(lower < output.median())
+    assert np.all(output.median() < upper)
+    np.testing.assert_allclose(upper - lower, 2 * SIGMA, rtol=0.2)
+
+
+def test_progress_is_quiet_plain_lines(static_run):
+    _, output, lines = static_run
+    assert lines[0].startswith("dynesty_static: 2 free parameters, seed 11")
+    # progress_every is huge: one progress line at the start, then only the summary
+    assert len(lines) == 3
+    assert lines[-1].startswith("dynesty_static: done")
+    assert f"{output.n_calls} calls" in lines[-1]
+    assert not any("\r" in line for line in lines)
+
+
+def test_progress_every_zero_logs_each_iteration():
+    lines: list[str] = []
+    settings = SamplerSettings(n_live=20, dlogz=5.0, progress_every=0.0)
+    output = run_nested(GaussianLikelihood(), SPACE, settings, seed=2, log=lines.append)
+    iterations = [line for line in lines if ": iteration " in line]
+    # one line per dead point, then one per live point added at the end
+    assert len(iterations) == len(output.samples)
+    assert "ln Z = " in iterations[-1]
+    assert "rejected" in iterations[-1]
+
+
+@pytest.fixture(scope="module")
+def fast_run():
+    return run_nested(GaussianLikelihood(), SPACE, FAST, seed=11, log=lambda _: None)
+
+
+def test_same_seed_same_run(fast_run):
+    again = run_nested(GaussianLikelihood(), SPACE, FAST, seed=11, log=lambda _: None)
+    np.testing.assert_array_equal(again.samples, fast_run.samples)
+    assert again.log_evidence == fast_run.log_evidence
+
+
+def test_rejected_samples_are_counted():
+    likelihood = GaussianLikelihood(reject_below=-2.0)
+    output = run_nested(likelihood, SPACE, FAST, seed=5, log=lambda _: None)
+    assert likelihood.rejected > 0
+    assert output.n_rejected == likelihood.rejected
+    assert output.n_calls == likelihood.calls
+    rejected_samples = output.log_likelihoods == REJECTED_LOG_LIKELIHOOD
+    assert np.all(output.weights[rejected_samples] == 0.0)
+    # the rejected third of the prior carries no likelihood: ln Z is unchanged
+    assert_recovers_gaussian(output)
+
+
+def test_rejections_are_counted_across_a_pool(tmp_path):
+    likelihood = GaussianLikelihood(reject_below=-2.0, marker_folder=tmp_path)
+    settings = SamplerSettings(n_live=50, progress_every=1e9, n_processes=2)
+    output = run_nested(likelihood, SPACE, settings, seed=5, log=lambda _: None)
+    assert output.n_rejected == len(list(tmp_path.iterdir())) > 0
+    assert likelihood.calls == 0  # every call ran in a worker
+    assert_recovers_gaussian(output)
+
+
+def test_resume_reproduces_the_uninterrupted_run(tmp_path, fast_run):
+    reference = fast_run
+    checkpoint = tmp_path / "sampler.pickle"
+    settings = SamplerSettings(n_live=100, progress_every=1e9, checkpoint_every=0.1)
+    with pytest.raises(Interrupted):  # once past half the calls and a checkpoint exists
+        run_nested(
+            GaussianLikelihood(stop_after=reference.n_calls // 2, stop_once_exists=checkpoint),
+            SPACE,
+            settings,
+            checkpoint,
+            seed=11,
+            log=lambda _: None,
+        )
+    assert checkpoint.exists()
+    lines: list[str] = []
+    resumed = run_nested(GaussianLikelihood(), SPACE, settings, checkpoint, 11, lines.append)
+    assert "resuming" in lines[0]
+    np.testing.assert_array_equal(resumed.samples, reference.samples)
+    np.testing.assert_array_equal(resumed.log_weights, reference.log_weights)
+    assert resumed.log_evidence == reference.log_evidence
+    assert resumed.log_evidence_error == reference.log_evidence_error
+    assert (resumed.n_calls, resumed.n_rejected) == (reference.n_calls, reference.n_rejected)
+    assert (resumed.n_resumes, reference.n_resumes) == (1, 0)
+
+    # a finished checkpoint returns the stored run without sampling
+    again = run_nested(failing_likelihood, SPACE, settings, checkpoint, 11, lambda _: None)
+    assert again == resumed
+
+    # a checkpoint of another fit is refused
+    with pytest.raises(CheckpointMismatchError, match="seed"):
+        run_nested(failing_likelihood, SPACE, settings, checkpoint, 12, lambda _: None)
+    other = ParameterSpace.from_priors({"toy.x": Uniform(-4, 4), "toy.y": Uniform(-BOX, BOX)})
+    with pytest.raises(CheckpointMismatchError, match="space"):
+        run_nested(failing_likelihood, other, settings, checkpoint, 11, lambda _: None)
+
+
+DYNAMIC = SamplerSettings(
+    method="dynesty_dynamic", n_live=50, n_effective=400, progress_every=1e9, checkpoint_every=0.1
+)
+
+
+@pytest.fixture(scope="module")
+def dynamic_run():
+    likelihood = GaussianLikelihood()
+    return likelihood, run_nested(likelihood, SPACE, DYNAMIC, seed=4, log=lambda _: None)
+
+
+def test_dynamic_sampler_recovers_evidence(dynamic_run):
+    likelihood, output = dynamic_run
+    assert output.method == "dynesty_dynamic"
+    assert output.n_calls == likelihood.calls
+    assert_recovers_gaussian(output)
+
+
+def test_dynamic_sampler_resumes(tmp_path, dynamic_run):
+    _, reference = dynamic_run
+    checkpoint = tmp_path / "sampler.pickle"
+    # the batches start after ~92 % of the calls: stop during one
+    stop = GaussianLikelihood(stop_after=int(0.95 * reference.n_calls), stop_once_exists=checkpoint)
+    with pytest.raises(Interrupted):
+        run_nested(stop, SPACE, DYNAMIC, checkpoint, seed=4, log=lambda _: None)
+    resumed = run_nested(GaussianLikelihood(), SPACE, DYNAMIC, checkpoint, 4, lambda _: None)
+    np.testing.assert_array_equal(resumed.samples, reference.samples)
+    assert resumed.log_evidence == reference.log_evidence
+    assert resumed.n_calls == reference.n_calls
+
+
+def test_nautilus_recovers_evidence():
+    pytest.importorskip("nautilus")
+    settings = SamplerSettings(
+        method="nautilus", n_live=100, n_networks=1, n_eff=200, progress_every=1e9
+    )
+    likelihood = GaussianLikelihood(reject_below=-2.0)
+    output = run_nested(likelihood, SPACE, settings, seed=4, log=lambda _: None)
+    assert output.n_calls == likelihood.calls
+    assert output.n_rejected == likelihood.rejected > 0
+    assert_recovers_gaussian(output, tolerance=0.15)
+
+
+def test_sample_method_resolution():
+    assert resolve_sample_method("auto", 8) == "unif"
+    assert resolve_sample_method("auto", 17) == "rwalk"
+    assert resolve_sample_method("auto", 21) == "rslice"
+    assert resolve_sample_method("slice", 3) == "slice"
+
+
+def test_settings_validation():
+    with pytest.raises(ValueError, match="method"):
+        SamplerSettings(method="multinest")
+    with pytest.raises(ValueError, match="unknown sampler settings"):
+        SamplerSettings.from_dict({"nlive": 100})
+    assert SamplerSettings.from_dict(FAST.to_dict()) == FAST
+    assert "n_processes" not in FAST.result_settings()
+
+
+def test_nan_likelihood_is_an_error():
+    def nan_likelihood(x):
+        return math.nan
+
+    with pytest.raises(FloatingPointError, match="return -1e"):
+        run_nested(nan_likelihood, SPACE, FAST, log=lambda _: None)
