@@ -1,0 +1,235 @@
+"""Snakemake workflow: dry runs, lint, config errors, sample sheets and a real mock run.
+
+Snakemake runs as a subprocess from the repository root with ``-d <tmp dir>``, so nothing
+is written into the repository.
+"""
+
+import json
+import os
+import re
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from astropy.io import fits
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
+from mgelens import cli
+from mgelens import simulate as sim
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def snakemake(*args: str, workdir: Path) -> subprocess.CompletedProcess:
+    """Run snakemake on the repository's Snakefile with working directory ``workdir``."""
+    environment = dict(os.environ, MPLBACKEND="Agg")
+    environment["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{environment['PATH']}"
+    return subprocess.run(
+        [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"),
+         "--directory", str(workdir), *args],
+        cwd=ROOT, capture_output=True, text=True, env=environment, timeout=600,
+    )  # fmt: skip
+
+
+def job_counts(output: str) -> dict[str, int]:
+    """The "Job stats" table of a dry run as {rule: count}."""
+    table = output.split("Job stats:")[1]
+    return {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", table, re.MULTILINE)}
+
+
+def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
+    result = snakemake("-n", workdir=tmp_path)
+    assert result.returncode == 0, result.stderr
+    counts = job_counts(result.stdout + result.stderr)
+    assert counts["simulate_mock"] == 3
+    assert counts["preview"] == 3
+    assert counts["all"] == 1
+    assert not list(tmp_path.iterdir()) or {p.name for p in tmp_path.iterdir()} <= {".snakemake"}
+
+
+def test_dry_run_of_the_population_sample(tmp_path):
+    result = snakemake("-n", "--configfile", "config/population.yaml", workdir=tmp_path)
+    assert result.returncode == 0, result.stderr
+    counts = job_counts(result.stdout + result.stderr)
+    assert counts["simulate_mock"] == counts["preview"] == sim.POPULATION_SIZE
+
+
+def test_dry_run_of_the_slacs_sample_reads_the_data_in_place(tmp_path, slacs_dir):
+    result = snakemake("-n", "--configfile", "config/slacs.yaml", workdir=tmp_path)
+    assert result.returncode == 0, result.stderr
+    counts = job_counts(result.stdout + result.stderr)
+    assert counts["preview"] == 61
+    assert "simulate_mock" not in counts
+    assert str(slacs_dir / "slacs0252+0039" / "data.fits") in result.stdout + result.stderr
+
+
+def test_lint_is_clean(tmp_path):
+    result = snakemake("--lint", workdir=tmp_path)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Congratulations, your workflow is in a good condition" in result.stdout + result.stderr
+
+
+SHEET_HEADER = "lens\tkind\tmock\tinput\tmask_radius\tmge_sets\tpoint_set\tz_lens\tz_source\n"
+
+
+@pytest.mark.parametrize(
+    ("config", "sheet", "message"),
+    [
+        ("population_seed: -1\n", None, "population_seed"),
+        ("samples: missing.tsv\n", None, "missing.tsv not found"),
+        ("data_dir: /nowhere\n", "R1\treal\t\tslacsX\t3.0\t2\tno\t0.2\t0.6\n",
+         "real lens 'R1': data.fits, noise_map.fits, psf.fits not found in /nowhere/slacsX"),
+    ],
+)  # fmt: skip
+def test_bad_configuration_stops_with_a_message_naming_the_value(tmp_path, config, sheet, message):
+    if sheet is not None:
+        (tmp_path / "sheet.tsv").write_text(SHEET_HEADER + sheet)
+        config += f"samples: {tmp_path / 'sheet.tsv'}\n"
+    (tmp_path / "config.yaml").write_text(config)
+    result = snakemake("-n", "--configfile", str(tmp_path / "config.yaml"), workdir=tmp_path)
+    assert result.returncode != 0
+    assert message in result.stdout + result.stderr
+
+
+SCHEMAS = ROOT / "workflow" / "schemas"
+
+
+@pytest.mark.parametrize(
+    ("config", "path"),
+    [
+        ({"samples": "x.tsv", "mock": {"image_size": 150}}, "image_size"),
+        ({"samples": "x.tsv", "mock": {"sub_size": 0}}, "sub_size"),
+        ({"samples": "x.tsv", "unknown_key": 3}, "unknown_key"),
+        ({"data_dir": "x"}, "samples"),
+    ],
+)
+def test_config_schema_rejects_bad_values(config, path):
+    with pytest.raises(WorkflowError, match=path):
+        validate(config, str(SCHEMAS / "config.schema.yaml"))
+
+
+def test_config_schema_fills_the_paper_defaults():
+    config = {"samples": "config/lenses.tsv"}
+    validate(config, str(SCHEMAS / "config.schema.yaml"))
+    assert config["mock"] == {"image_size": 151, "sub_size": 16}
+    assert config["data_dir"] == "../shared/data/slacs"
+
+
+@pytest.mark.parametrize(
+    ("row", "message"),
+    [
+        ("X1\tmock\tM7\t\t1.8\t4\tyes\t0.2\t0.6", "'M7' does not match"),
+        ("X1\tmock\tM1\t\t1.8\t3\tyes\t0.2\t0.6", "3 is not one of [2, 4, 6]"),
+        ("X1\tmock\t\t\t1.8\t4\tyes\t0.2\t0.6", "'mock' is a required property"),
+        ("X1\treal\t\t\t1.8\t4\tyes\t0.2\t0.6", "'input' is a required property"),
+        ("X1\treal\tM1\tdir\t1.8\t4\tyes\t0.2\t0.6", "should not be valid"),
+        ("X1\tmock\tM1\t\t1.8\t4\tmaybe\t0.2\t0.6", "'maybe' is not one of"),
+        ("X 1\tmock\tM1\t\t1.8\t4\tyes\t0.2\t0.6", "'X 1' does not match"),
+    ],
+)  # fmt: skip
+def test_sample_sheet_schema_rejects_bad_rows(tmp_path, row, message):
+    (tmp_path / "sheet.tsv").write_text(SHEET_HEADER + row + "\n")
+    sheet = pd.read_csv(tmp_path / "sheet.tsv", sep="\t", dtype={"mock": str, "input": str})
+    with pytest.raises(WorkflowError) as error:
+        validate(sheet, str(SCHEMAS / "lenses.schema.yaml"))
+    assert message in str(error.value)
+
+
+@pytest.mark.parametrize("sheet", ["lenses.tsv", "population.tsv", "slacs.tsv"])
+def test_shipped_sample_sheets_are_valid(sheet):
+    validate(read_sheet(sheet), str(SCHEMAS / "lenses.schema.yaml"))
+
+
+def test_rule_outputs_are_the_simulator_files():
+    rules = (ROOT / "workflow" / "rules" / "mocks.smk").read_text()
+    declared = set(re.findall(r'"results/\{lens\}/mock/([\w.]+)"', rules))
+    assert declared == set(sim.MOCK_FILES.values())
+
+
+def test_conda_environment_of_the_rules_mirrors_pyproject():
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    environment = yaml.safe_load((ROOT / "workflow" / "envs" / "mgelens.yaml").read_text())
+    conda = {d.replace(" ", "") for d in environment["dependencies"]}
+    assert conda - {"pip", "python>=3.11"} == {
+        d.replace(" ", "") for d in pyproject["project"]["dependencies"]
+    }
+    assert (ROOT / "workflow" / "envs" / "mgelens.post-deploy.sh").is_file()
+
+
+def read_sheet(name: str) -> pd.DataFrame:
+    return pd.read_csv(ROOT / "config" / name, sep="\t", dtype={"mock": str, "input": str})
+
+
+def test_sample_sheets_agree_with_the_mock_recipes():
+    paper = read_sheet("lenses.tsv").set_index("lens")
+    assert list(paper.index) == ["M1", "M2", "M3"]
+    for name, row in paper.iterrows():
+        assert row["mock"] == name
+        table = sim.PAPER_MOCKS[name]
+        assert (row["z_lens"], row["z_source"]) == (table.z_lens, table.z_source)
+        assert row["mask_radius"] == table.mask_radius
+    population = read_sheet("population.tsv")
+    assert len(population) == sim.POPULATION_SIZE
+    for index, row in population.iterrows():
+        lens = sim.population_lens(index)
+        assert row["lens"] == row["mock"] == lens.name
+        assert row["z_lens"] == pytest.approx(lens.z_lens, abs=1e-4)
+        assert row["z_source"] == pytest.approx(lens.z_source, abs=1e-4)
+
+
+def test_slacs_sheet_lists_every_shared_lens_with_its_redshifts(slacs_dir):
+    sheet = read_sheet("slacs.tsv")
+    folders = sorted(p.name for p in slacs_dir.iterdir() if (p / "info.json").is_file())
+    assert sorted(sheet["lens"]) == folders
+    assert (sheet["input"] == sheet["lens"]).all()
+    assert (sheet["mask_radius"] == 3.0).all()
+    for _, row in sheet.iterrows():
+        info = json.loads((slacs_dir / row["input"] / "info.json").read_text())
+        assert (row["z_lens"], row["z_source"]) == (info["z_lens"], info["z_source"])
+
+
+def test_preview_of_a_real_lens(tmp_path, slacs_dir):
+    out = tmp_path / "preview.png"
+    assert cli.main(["preview", str(slacs_dir / "slacs0252+0039"), "--out", str(out)]) == 0
+    assert out.read_bytes().startswith(b"\x89PNG")
+    assert out.stat().st_size < 300_000
+
+
+def test_preview_of_a_missing_folder_names_it(tmp_path, caplog):
+    folder = tmp_path / "nothing"
+    assert cli.main(["preview", str(folder), "--out", str(tmp_path / "p.png")]) == 1
+    assert f"{folder}: imaging folder not found" in caplog.text
+
+
+@pytest.mark.slow
+def test_simulate_mock_and_preview_run_end_to_end(tmp_path):
+    repo_outputs = {name: (ROOT / name).exists() for name in ("results", "logs", ".snakemake")}
+    (tmp_path / "small.yaml").write_text("mock:\n  image_size: 61\n  sub_size: 4\n")
+    target = "results/M1/figures/preview.png"
+    result = snakemake(target, "-c2", "--configfile", str(tmp_path / "small.yaml"),
+                       workdir=tmp_path)  # fmt: skip
+    assert result.returncode == 0, result.stdout + result.stderr
+    folder = tmp_path / "results" / "M1" / "mock"
+    assert {p.name for p in folder.iterdir()} == set(sim.MOCK_FILES.values())
+    truth = json.loads((folder / "truth.json").read_text())
+    assert truth["observation"]["image_size"] == 61
+    assert truth["observation"]["sub_size"] == 4
+    assert truth["signal_to_noise"]["source_max"] == pytest.approx(50.0, abs=1e-6)
+    data = fits.getdata(folder / "data.fits")
+    assert data.shape == (61, 61)
+    assert np.isfinite(data).all()
+    assert (tmp_path / target).stat().st_size > 10_000
+    for rule in ("simulate_mock", "preview"):
+        assert (tmp_path / "logs" / "M1" / f"{rule}.log").is_file()
+        benchmark = tmp_path / "results" / "M1" / "benchmarks" / f"{rule}.tsv"
+        assert benchmark.read_text().startswith("s\t")
+    assert "written to results/M1/mock" in (tmp_path / "logs/M1/simulate_mock.log").read_text()
+    assert {name: (ROOT / name).exists() for name in repo_outputs} == repo_outputs
+    assert snakemake(target, "-n", "--configfile", str(tmp_path / "small.yaml"),
+                     workdir=tmp_path).stdout.count("rule ") == 0  # fmt: skip

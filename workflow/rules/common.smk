@@ -1,0 +1,140 @@
+"""Sample sheet, configuration checks, wildcard constraints and path helpers.
+
+Every helper is a named function (no lambdas in rules). Relative paths in the config
+(`samples`, `data_dir`) are relative to the repository root, the folder of the
+top-level Snakefile, so `snakemake -d <elsewhere>` finds them too.
+"""
+
+import os
+import re
+from pathlib import Path
+
+import pandas as pd
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
+import mgelens
+
+
+validate(config, schema="../schemas/config.schema.yaml")
+
+REPO = Path(workflow.basedir)
+MGELENS_VERSION = mgelens.__version__
+
+
+def repo_path(value: str) -> Path:
+    """``value`` as a path; relative paths are taken from the repository root."""
+    path = Path(value).expanduser()
+    return path if path.is_absolute() else Path(os.path.normpath(REPO / path))
+
+
+def read_sample_sheet(path: Path) -> pd.DataFrame:
+    """The sample sheet (tab-separated, one row per lens), indexed by lens id."""
+    if not path.is_file():
+        raise WorkflowError(
+            f"sample sheet {path} not found: set `samples` in the config to a .tsv file "
+            f"(relative paths start at the repository root {REPO})"
+        )
+    sheet = pd.read_csv(
+        path, sep="\t", comment="#", dtype={"lens": str, "mock": str, "input": str}
+    )
+    duplicated = sheet["lens"][sheet["lens"].duplicated()].tolist() if "lens" in sheet else []
+    if duplicated:
+        raise WorkflowError(f"{path}: lens ids must be unique, repeated: {duplicated}")
+    return sheet.set_index("lens", drop=False)
+
+
+SAMPLE_SHEET = repo_path(config["samples"])
+LENSES = read_sample_sheet(SAMPLE_SHEET)
+validate(LENSES, schema="../schemas/lenses.schema.yaml")
+DATA_DIR = repo_path(config["data_dir"])
+
+
+def real_input_folder(lens: str) -> Path:
+    """Input folder of a real lens: its `input` column, under `data_dir` if relative."""
+    folder = Path(LENSES.loc[lens, "input"]).expanduser()
+    return folder if folder.is_absolute() else DATA_DIR / folder
+
+
+def check_real_inputs() -> None:
+    """Stop early, naming sheet, lens and folder, if a real lens's input folder is absent."""
+    for lens in LENSES.index[LENSES["kind"] == "real"]:
+        folder = real_input_folder(lens)
+        missing = [f for f in ("data.fits", "noise_map.fits", "psf.fits") if not (folder / f).is_file()]
+        if missing:
+            raise WorkflowError(
+                f"{SAMPLE_SHEET}: real lens {lens!r}: {', '.join(missing)} not found in {folder}; "
+                f"set `data_dir` in the config (now {config['data_dir']!r}, relative to "
+                f"{REPO}) or fix the `input` column of the sheet"
+            )
+
+
+check_real_inputs()
+
+
+def id_pattern(ids) -> str:
+    """Regular expression matching exactly the given lens ids (never matches if empty)."""
+    ids = list(ids)
+    return "|".join(re.escape(i) for i in ids) if ids else "(?!)"
+
+
+MOCK_LENSES = id_pattern(LENSES.index[LENSES["kind"] == "mock"])
+
+
+wildcard_constraints:
+    lens=id_pattern(LENSES.index),
+
+
+def is_mock(lens: str) -> bool:
+    return LENSES.loc[lens, "kind"] == "mock"
+
+
+def imaging_folder(lens: str) -> str:
+    """Folder holding data.fits, noise_map.fits and psf.fits of a lens."""
+    return f"results/{lens}/mock" if is_mock(lens) else str(real_input_folder(lens))
+
+
+def mock_folder(wildcards) -> str:
+    return f"results/{wildcards.lens}/mock"
+
+
+def lens_imaging_folder(wildcards) -> str:
+    return imaging_folder(wildcards.lens)
+
+
+def imaging_files(wildcards) -> dict:
+    """data, noise_map and psf files of a lens (mock: made by rule simulate_mock)."""
+    folder = imaging_folder(wildcards.lens)
+    return {name: f"{folder}/{name}.fits" for name in ("data", "noise_map", "psf")}
+
+
+def preview_inputs(wildcards) -> dict:
+    """Files the preview of a lens reads: the imaging, plus the truth of a mock."""
+    files = imaging_files(wildcards)
+    if is_mock(wildcards.lens):
+        folder = imaging_folder(wildcards.lens)
+        for name in ("lens_light_blurred", "lensed_source_blurred", "source"):
+            files[name] = f"{folder}/{name}.fits"
+        files["truth"] = f"{folder}/truth.json"
+    return files
+
+
+def simulate_recipe(wildcards) -> str:
+    """CLI arguments naming the mock of a lens: a paper mock or a population lens."""
+    recipe = LENSES.loc[wildcards.lens, "mock"]
+    if recipe.startswith("P"):
+        return f"--population-index {int(recipe[1:])} --population-seed {config['population_seed']}"
+    return f"--mock {recipe}"
+
+
+def simulate_mem_mb(wildcards, attempt) -> int:
+    return 1500 * attempt
+
+
+def preview_mem_mb(wildcards, attempt) -> int:
+    return 1000 * attempt
+
+
+def all_targets() -> list[str]:
+    """Default target: a preview per lens (which pulls in the mocks)."""
+    return [f"results/{lens}/figures/preview.png" for lens in LENSES.index]

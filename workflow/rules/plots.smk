@@ -1,0 +1,28 @@
+"""Figures per lens."""
+
+
+rule preview:
+    input:
+        unpack(preview_inputs),
+    output:
+        report(
+            "results/{lens}/figures/preview.png",
+            caption="../report/preview.rst",
+            category="Previews",
+            labels={"lens": "{lens}"},
+        ),
+    log:
+        "logs/{lens}/preview.log",
+    benchmark:
+        "results/{lens}/benchmarks/preview.tsv"
+    params:
+        mgelens_version=MGELENS_VERSION,
+        folder=lens_imaging_folder,
+    threads: 1
+    resources:
+        mem_mb=preview_mem_mb,
+        runtime=5,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens preview {params.folder:q} --out {output:q} > {log:q} 2>&1"
