@@ -135,6 +135,22 @@ def preview_mem_mb(wildcards, attempt) -> int:
     return 1000 * attempt
 
 
+def lens_light_image(wildcards) -> str:
+    """PSF-convolved lens-light image whose isophotes are analysed.
+
+    Until the light phase has run, mocks are analysed on their true lens light.
+    """
+    return f"{imaging_folder(wildcards.lens)}/lens_light_blurred.fits"
+
+
+def isophote_summaries(wildcards) -> list[str]:
+    """Per-lens isophote summaries gathered by the sample summary (mocks only for now)."""
+    return [f"results/{lens}/isophotes.json" for lens in LENSES.index[LENSES["kind"] == "mock"]]
+
+
 def all_targets() -> list[str]:
-    """Default target: a preview per lens (which pulls in the mocks)."""
-    return [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
+    """Default target: previews, isophotes per lens and the sample summary."""
+    targets = [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
+    if (LENSES["kind"] == "mock").any():
+        targets += ["results/summary/lenses.csv", "results/summary/histograms.png"]
+    return targets

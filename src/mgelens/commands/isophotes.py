@@ -19,7 +19,7 @@ import numpy as np
 
 from mgelens.atomic import atomic_path, write_json
 from mgelens.convolve import convolve_image
-from mgelens.imaging import ImagingError, read_fits_image
+from mgelens.imaging import PIXSCALE_KEY, ImagingError, read_fits_image
 from mgelens.isophotes import (
     IsophoteStatistics,
     brightest_pixel_centre,
@@ -42,7 +42,9 @@ def register(subparsers) -> None:
     )
     parser.add_argument("image", type=Path, help="FITS image of the lens light")
     parser.add_argument(
-        "--pixel-scale", type=float, required=True, help="arcsec per pixel (e.g. 0.05)"
+        "--pixel-scale",
+        type=float,
+        help="arcsec per pixel (default: the PIXSCALE keyword of the image header)",
     )
     parser.add_argument(
         "--centre",
@@ -77,8 +79,14 @@ def format_statistics(lens: str, statistics: IsophoteStatistics) -> str:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        image, _ = read_fits_image(args.image)
+        image, header = read_fits_image(args.image)
         image = np.asarray(image, dtype=float)
+        if args.pixel_scale is None:
+            if PIXSCALE_KEY not in header:
+                raise ValueError(
+                    f"{args.image}: no {PIXSCALE_KEY} keyword in the header; pass --pixel-scale"
+                )
+            args.pixel_scale = float(header[PIXSCALE_KEY])
         if args.psf is not None:
             psf, _ = read_fits_image(args.psf)
             image = convolve_image(image, np.asarray(psf, dtype=float) / np.sum(psf))

@@ -1,0 +1,58 @@
+"""Isophote analysis of each lens light and the sample summary (SPEC §9)."""
+
+
+rule isophotes:
+    input:
+        image=lens_light_image,
+    output:
+        table="results/{lens}/isophotes.csv",
+        summary="results/{lens}/isophotes.json",
+        figure=report(
+            "results/{lens}/figures/isophotes.png",
+            caption="../report/isophotes.rst",
+            category="Isophotes",
+            labels={"lens": "{lens}"},
+        ),
+    log:
+        "logs/{lens}/isophotes.log",
+    benchmark:
+        "results/{lens}/benchmarks/isophotes.tsv"
+    params:
+        mgelens_version=MGELENS_VERSION,
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens isophotes {input.image:q} "
+        "--lens {wildcards.lens} --summary {output.summary:q} --figure {output.figure:q} "
+        "--out {output.table:q} > {log:q} 2>&1"
+
+
+rule summary:
+    input:
+        isophote_summaries,
+    output:
+        table="results/summary/lenses.csv",
+        figure=report(
+            "results/summary/histograms.png",
+            caption="../report/summary.rst",
+            category="Sample",
+        ),
+    log:
+        "logs/summary.log",
+    benchmark:
+        "results/summary/benchmarks/summary.tsv"
+    params:
+        mgelens_version=MGELENS_VERSION,
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens summary {input:q} --out-table {output.table:q} "
+        "--out-figure {output.figure:q} > {log:q} 2>&1"
