@@ -1,0 +1,477 @@
+"""One model + one dataset -> model image, residuals, χ², log likelihood and log evidence.
+
+This is the function every sampler calls (SPEC §4–7). A :class:`LensModel` holds the
+mass profiles, the lens light (MGE sets whose intensities are solved linearly, plus any
+fixed non-linear light) and the source: an MGE in the source plane
+(:class:`MGESource`, SP phase) or a Voronoi mesh with natural-neighbour interpolation
+(:class:`PixelizedSource`). All linear unknowns, ordered [lens-light Gaussians |
+source Gaussians | source pixels], are solved at once, non-negative by default.
+
+Failures of the mesh or of the linear algebra raise :class:`FitError` subclasses;
+:func:`figure_of_merit` turns them into a rejected sample (SPEC §8.4).
+"""
+
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+import numpy as np
+from scipy import sparse
+
+from mgelens import mass as mass_module
+from mgelens.grid import SubGrid, pixel_centres, sub_grid, to_native
+from mgelens.imaging import Imaging
+from mgelens.inversion.evidence import (
+    log_det_cholesky,
+    log_det_regularization,
+    log_evidence,
+    log_likelihood,
+    noise_normalization,
+)
+from mgelens.inversion.solve import InversionError, LinearSolution, solve_linear_system
+from mgelens.inversion.system import TilePlan, curvature_matrix, data_vector
+from mgelens.light import LightGrid, MGESet
+from mgelens.mask import validate_mask
+from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
+from mgelens.source.border import border_sub_pixels, relocate_to_border
+from mgelens.source.image_mesh import mask_extent_centre
+from mgelens.source.interpolate import natural_neighbour_weights, nearest_cell_weights
+from mgelens.source.mapping import SourceWeights, mapping_matrix
+from mgelens.source.mesh import MeshError, VoronoiMesh
+
+INTERPOLATIONS = ("natural_neighbour", "nearest")
+
+FitError = (MeshError, InversionError, np.linalg.LinAlgError, FloatingPointError)
+"""Exceptions that mean "this sample cannot be fitted" rather than a programming error."""
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Numerical choices of a fit (SPEC §1.3, §4.2, §6).
+
+    Attributes
+    ----------
+    positive_only : bool
+        Non-negative solve of all linear unknowns ("nn-MGE", default) or unconstrained ("pn").
+    sub_size : int
+        s of the s×s sub-grid that maps image pixels onto the source mesh (4).
+    lp_sub_size, lp_sub_size_centre, lp_centre_radius : int, int, float
+        Light-profile over-sampling: ``lp_sub_size`` everywhere, ``lp_sub_size_centre``
+        within ``lp_centre_radius`` arcsec of the lens-light centre (4, 16, 0.3″).
+    use_border : bool
+        Relocate traced positions beyond the mask border onto it (SPEC §4.2).
+    mge_diagonal : float
+        μ added to the curvature diagonal of unregularized linear columns (1e−3).
+    force_edge_pixels_to_zero : bool
+        Fix convex-hull source pixels to zero in the non-negative solve (SPEC §6.3).
+    """
+
+    positive_only: bool = True
+    sub_size: int = 4
+    lp_sub_size: int = 4
+    lp_sub_size_centre: int = 16
+    lp_centre_radius: float = 0.3
+    use_border: bool = True
+    mge_diagonal: float = 1e-3
+    force_edge_pixels_to_zero: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class FitDataset:
+    """An :class:`Imaging` inside a mask with everything a fit precomputes once.
+
+    Build with :meth:`from_imaging`; slim vectors are over the unmasked pixels.
+    """
+
+    imaging: Imaging
+    mask: np.ndarray
+    settings: FitSettings
+    light_grid: LightGrid
+    source_grid: SubGrid
+    border: np.ndarray
+    _columns_cache: dict = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def from_imaging(
+        cls,
+        imaging: Imaging,
+        mask: np.ndarray | None = None,
+        settings: FitSettings | None = None,
+        light_centre: tuple[float, float] = (0.0, 0.0),
+    ) -> "FitDataset":
+        """Precompute grids for ``imaging`` in ``mask`` (default: the imaging's own mask).
+
+        ``light_centre`` is the lens-light prior centre around which light profiles are
+        over-sampled more finely.
+        """
+        settings = settings or FitSettings()
+        mask = imaging.mask if mask is None else mask
+        if mask is None:
+            raise ValueError("a fit needs a mask: pass mask= or give the Imaging a mask")
+        mask = validate_mask(mask, imaging.shape)
+        used = ~mask
+        if not np.all(np.isfinite(imaging.data[used])) or np.any(imaging.noise_map[used] <= 0):
+            raise ValueError(
+                f"{imaging.name or 'imaging'}: data must be finite and noise > 0 inside the mask"
+            )
+        light_grid = LightGrid.from_mask(
+            mask,
+            imaging.psf,
+            imaging.pixel_scale,
+            centre=light_centre,
+            sub_size=settings.lp_sub_size,
+            sub_size_centre=settings.lp_sub_size_centre,
+            centre_radius=settings.lp_centre_radius,
+        )
+        x, y = pixel_centres(mask.shape, imaging.pixel_scale)
+        source_grid = sub_grid(x[used], y[used], imaging.pixel_scale, settings.sub_size)
+        border = border_sub_pixels(
+            mask,
+            source_grid.x,
+            source_grid.y,
+            settings.sub_size,
+            mask_extent_centre(mask, imaging.pixel_scale),
+        )
+        return cls(imaging, mask, settings, light_grid, source_grid, border)
+
+    @cached_property
+    def data(self) -> np.ndarray:
+        return self.imaging.data[~self.mask]
+
+    @cached_property
+    def noise_map(self) -> np.ndarray:
+        return self.imaging.noise_map[~self.mask]
+
+    @cached_property
+    def inverse_variance(self) -> np.ndarray:
+        return 1.0 / self.noise_map**2
+
+    @cached_property
+    def noise_normalization(self) -> float:
+        return noise_normalization(self.noise_map)
+
+    @property
+    def convolver(self):
+        return self.light_grid.convolver
+
+    @cached_property
+    def source_psf_operator(self) -> sparse.csr_matrix:
+        """Mask-to-mask PSF operator B (N_I × N_I) of pixelized-source columns (SPEC §1.4)."""
+        return self.convolver.operator(include_blurring=False)
+
+    @cached_property
+    def tile_plan(self) -> TilePlan:
+        """Tiling of the masked pixels for the source curvature matrix."""
+        return TilePlan.from_mask(self.mask, self.imaging.psf)
+
+    def lens_light_columns(self, sets: tuple[MGESet, ...]) -> np.ndarray:
+        """PSF-convolved unit columns of the lens-light sets (N_I, Σ N_g), cached.
+
+        Phases that keep the MGE geometry fixed and only re-solve intensities pay for the
+        columns once.
+        """
+        key = tuple((tuple(s.centre), tuple(s.ell_comps), s.sigmas.tobytes()) for s in sets)
+        if key not in self._columns_cache:
+            if len(self._columns_cache) >= 4:
+                self._columns_cache.pop(next(iter(self._columns_cache)))
+            self._columns_cache[key] = self.light_grid.blurred_columns(list(sets))
+        return self._columns_cache[key]
+
+
+@dataclass(frozen=True)
+class MGESource:
+    """Parametric source: MGE sets in the source plane (the SP phase's source)."""
+
+    sets: tuple[MGESet, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class PixelizedSource:
+    """Voronoi source mesh with its regularization (SPEC §4–5).
+
+    Attributes
+    ----------
+    image_plane_x, image_plane_y : ndarray
+        Image-plane mesh centres (overlay or k-means, arcsec), traced every evaluation.
+    regularization : object
+        A scheme from :mod:`mgelens.source.regularization` (``Constant``,
+        ``AdaptiveBrightness``, ``ConstantSplit``, ``AdaptiveBrightnessSplit``).
+    interpolation : {"natural_neighbour", "nearest"}
+        Sibson weights (paper) or nearest-cell mapping (older scheme).
+    adapt_image : ndarray or None
+        Slim adapt image Ξ (lensed source of an earlier fit), for adaptive schemes.
+    """
+
+    image_plane_x: np.ndarray
+    image_plane_y: np.ndarray
+    regularization: object
+    interpolation: str = "natural_neighbour"
+    adapt_image: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.interpolation not in INTERPOLATIONS:
+            raise ValueError(
+                f"unknown interpolation {self.interpolation!r}; use one of {INTERPOLATIONS}"
+            )
+
+
+@dataclass(frozen=True)
+class LensModel:
+    """Mass profiles, lens light and source of one lens.
+
+    Attributes
+    ----------
+    mass : tuple
+        Mass profiles (EPL, SIE, ExternalShear, ...), deflections summed.
+    lens_light : tuple of MGESet
+        Linear lens light: every Gaussian's intensity is solved.
+    fixed_light : tuple
+        Non-linear light with fixed intensities (e.g. Sérsic), subtracted from the data.
+    source : MGESource, PixelizedSource or None
+    """
+
+    mass: tuple = ()
+    lens_light: tuple[MGESet, ...] = ()
+    fixed_light: tuple = ()
+    source: MGESource | PixelizedSource | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class SourceReconstruction:
+    """The pixelized source of a fit: its traced mesh, fluxes and regularization."""
+
+    mesh: VoronoiMesh
+    fluxes: np.ndarray
+    regularization_matrix: sparse.csc_matrix
+    weights: SourceWeights
+
+    def image(self, shape: tuple[int, int] = (101, 101), half_width: float | None = None):
+        """Source interpolated (natural neighbour) on a regular grid for plots.
+
+        Returns (image, extent) with extent = (x_min, x_max, y_min, y_max) in arcsec for
+        ``imshow(..., origin="lower", extent=extent)``; zero outside the mesh hull.
+        """
+        points = self.mesh.points
+        centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+        if half_width is None:
+            half_width = 0.5 * float(np.ptp(points, axis=0).max()) * 1.05
+        pixel = 2.0 * half_width / shape[1]
+        x, y = pixel_centres(shape, pixel, origin=(centre[0], centre[1]))
+        inside = self.mesh.delaunay.find_simplex(np.column_stack([x.ravel(), y.ravel()])) >= 0
+        indptr, indices, values = natural_neighbour_weights(
+            self.mesh, x.ravel()[inside], y.ravel()[inside]
+        )
+        rows = np.repeat(np.arange(inside.sum()), np.diff(indptr))
+        flat = np.zeros(x.size)
+        flat[inside] = np.bincount(rows, values * self.fluxes[indices], minlength=inside.sum())
+        extent = (
+            centre[0] - half_width,
+            centre[0] + half_width,
+            centre[1] - half_width,
+            centre[1] + half_width,
+        )
+        return flat.reshape(shape), extent
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult:
+    """Everything a fit produces; slim vectors over the unmasked pixels.
+
+    ``residuals`` are data − model; ``normalized_residuals`` are (data − model)/σ.
+    ``log_evidence`` equals ``log_likelihood`` when there is no pixelized source.
+    """
+
+    dataset: FitDataset
+    model: LensModel
+    solution: LinearSolution
+    n_lens_light: int
+    n_source_light: int
+    model_image: np.ndarray
+    lens_light_image: np.ndarray
+    lensed_source_image: np.ndarray
+    chi_squared: float
+    log_likelihood: float
+    log_evidence: float
+    regularization_term: float = 0.0
+    log_det_curvature_regularization: float = 0.0
+    log_det_regularization: float = 0.0
+    source: SourceReconstruction | None = None
+
+    @property
+    def lens_light_intensities(self) -> np.ndarray:
+        return self.solution.x[: self.n_lens_light]
+
+    @property
+    def source_light_intensities(self) -> np.ndarray:
+        return self.solution.x[self.n_lens_light : self.n_lens_light + self.n_source_light]
+
+    @property
+    def residuals(self) -> np.ndarray:
+        return self.dataset.data - self.model_image
+
+    @property
+    def normalized_residuals(self) -> np.ndarray:
+        return self.residuals / self.dataset.noise_map
+
+    def native(self, slim: np.ndarray) -> np.ndarray:
+        """A slim vector on the native grid (zero outside the mask)."""
+        return to_native(slim, self.dataset.mask)
+
+
+def _traced_source_positions(dataset: FitDataset, mass, source: PixelizedSource):
+    grid = dataset.source_grid
+    bx, by = mass_module.ray_trace(mass, grid.x, grid.y)
+    mx, my = mass_module.ray_trace(mass, source.image_plane_x, source.image_plane_y)
+    if dataset.settings.use_border:
+        border_x, border_y = bx[dataset.border], by[dataset.border]
+        bx, by = relocate_to_border(bx, by, border_x, border_y)
+        mx, my = relocate_to_border(mx, my, border_x, border_y)
+    return bx, by, mx, my
+
+
+@dataclass(frozen=True, eq=False)
+class SourceOperator:
+    """The pixelized source's part of the linear system for one mass model.
+
+    ``mapping`` is f (N_I × N_S, sparse); the blurred mapping matrix B f is formed only
+    on request (:attr:`blurred_mapping`), the fit itself never needs it.
+    """
+
+    mesh: VoronoiMesh
+    weights: SourceWeights
+    mapping: sparse.csr_matrix
+    regularization_matrix: sparse.csc_matrix
+    psf_operator: sparse.csr_matrix
+
+    @cached_property
+    def blurred_mapping(self) -> sparse.csr_matrix:
+        """M^src = B f: every column PSF-convolved inside the mask (SPEC §4.5)."""
+        return (self.psf_operator @ self.mapping).tocsr()
+
+    def image(self, fluxes: np.ndarray) -> np.ndarray:
+        """Lensed, PSF-convolved source image (N_I,) of the source-pixel ``fluxes``."""
+        return self.psf_operator @ (self.mapping @ fluxes)
+
+
+def pixelized_operator(dataset: FitDataset, mass, source: PixelizedSource) -> SourceOperator:
+    """Trace, mesh, interpolate, blur and regularize a pixelized source (SPEC §4–5)."""
+    bx, by, mx, my = _traced_source_positions(dataset, mass, source)
+    mesh = VoronoiMesh.from_points(mx, my)
+    interpolate = (
+        natural_neighbour_weights
+        if source.interpolation == "natural_neighbour"
+        else nearest_cell_weights
+    )
+    indptr, indices, values = interpolate(mesh, bx, by)
+    weights = SourceWeights(indptr, indices, values, dataset.settings.sub_size, mesh.n_points)
+    h = source.regularization.matrix(mesh, weights, source.adapt_image)
+    return SourceOperator(mesh, weights, mapping_matrix(weights), h, dataset.source_psf_operator)
+
+
+def source_light_columns(dataset: FitDataset, mass, sets: tuple[MGESet, ...]) -> np.ndarray:
+    """PSF-convolved unit columns (N_I, Σ N_g) of source-plane MGE sets seen through ``mass``."""
+    grid = dataset.light_grid.grid
+    bx, by = mass_module.ray_trace(mass, grid.x, grid.y)
+    traced = replace(grid, x=bx, y=by)
+    columns = np.concatenate([s.columns(traced) for s in sets], axis=1)
+    return dataset.convolver.blur_columns(columns, include_blurring=True)
+
+
+def fit(dataset: FitDataset, model: LensModel) -> FitResult:
+    """Solve all linear light and source unknowns of ``model`` and score it (SPEC §6–7).
+
+    Raises one of :data:`FitError` when the sample cannot be fitted (degenerate mesh,
+    non-positive-definite system, NNLS iteration cap).
+    """
+    settings = dataset.settings
+    fixed = (
+        dataset.light_grid.blurred_image(list(model.fixed_light))
+        if model.fixed_light
+        else np.zeros(dataset.data.size)
+    )
+    lens_columns = (
+        dataset.lens_light_columns(tuple(model.lens_light))
+        if model.lens_light
+        else np.zeros((dataset.data.size, 0))
+    )
+    source = model.source
+    source_columns = (
+        source_light_columns(dataset, model.mass, source.sets)
+        if isinstance(source, MGESource)
+        else np.zeros((dataset.data.size, 0))
+    )
+    dense = np.hstack([lens_columns, source_columns])
+    n_dense = dense.shape[1]
+    operator = mapping = None
+    if isinstance(source, PixelizedSource):
+        operator = pixelized_operator(dataset, model.mass, source)
+        mapping, h = operator.mapping, operator.regularization_matrix
+    if n_dense == 0 and operator is None:
+        raise ValueError("the model has no linear light: give it lens light or a source")
+
+    residual_data = dataset.data - fixed
+    d = data_vector(
+        dense, mapping, dataset.source_psf_operator, dataset.inverse_variance, residual_data
+    )
+    f = curvature_matrix(dense, mapping, dataset.tile_plan, dataset.inverse_variance)
+    q = f.copy()
+    q[np.arange(n_dense), np.arange(n_dense)] += settings.mge_diagonal
+    fixed_zero = None
+    if operator is not None:
+        h_dense = h.toarray()
+        q[n_dense:, n_dense:] += h_dense
+        if settings.positive_only and settings.force_edge_pixels_to_zero:
+            fixed_zero = np.concatenate([np.zeros(n_dense, dtype=bool), operator.mesh.edge_pixels])
+    solution = solve_linear_system(
+        q,
+        d,
+        positive_only=settings.positive_only,
+        fixed_zero=fixed_zero,
+        source_block=slice(n_dense, None) if operator is not None else None,
+    )
+
+    x = solution.x
+    n_lens = lens_columns.shape[1]
+    lens_light_image = lens_columns @ x[:n_lens] + fixed
+    lensed_source_image = source_columns @ x[n_lens:n_dense]
+    if operator is not None:
+        lensed_source_image = lensed_source_image + operator.image(x[n_dense:])
+    model_image = lens_light_image + lensed_source_image
+    chi_squared = float(np.sum((dataset.data - model_image) ** 2 * dataset.inverse_variance))
+    log_like = log_likelihood(chi_squared, dataset.noise_normalization)
+    common = dict(
+        dataset=dataset,
+        model=model,
+        solution=solution,
+        n_lens_light=n_lens,
+        n_source_light=n_dense - n_lens,
+        model_image=model_image,
+        lens_light_image=lens_light_image,
+        lensed_source_image=lensed_source_image,
+        chi_squared=chi_squared,
+        log_likelihood=log_like,
+    )
+    if operator is None:
+        return FitResult(**common, log_evidence=log_like)
+
+    fluxes = x[n_dense:]
+    regularization_term = float(fluxes @ (h @ fluxes))
+    log_det_fh = log_det_cholesky(f[n_dense:, n_dense:] + h_dense)
+    log_det_h = log_det_regularization(h)
+    return FitResult(
+        **common,
+        log_evidence=log_evidence(
+            chi_squared, regularization_term, log_det_fh, log_det_h, dataset.noise_normalization
+        ),
+        regularization_term=regularization_term,
+        log_det_curvature_regularization=log_det_fh,
+        log_det_regularization=log_det_h,
+        source=SourceReconstruction(operator.mesh, fluxes, h, operator.weights),
+    )
+
+
+def figure_of_merit(dataset: FitDataset, model: LensModel) -> tuple[float, str]:
+    """Log evidence of ``model``, or (−1e99, reason) if the sample must be rejected."""
+    try:
+        return fit(dataset, model).log_evidence, ""
+    except FitError as error:
+        return REJECTED_LOG_LIKELIHOOD, f"{type(error).__name__}: {error}"

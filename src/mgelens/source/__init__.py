@@ -1,0 +1,1 @@
+"""Pixelized source: Voronoi mesh, natural-neighbour interpolation (SPEC §4)."""

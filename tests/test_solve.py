@@ -1,0 +1,296 @@
+"""Tests of the normal-equation solves (SPEC §6.2–6.3).
+
+The NNLS oracle is ``scipy.optimize.nnls`` on the Cholesky factor: with Q = L Lᵀ,
+min ‖Lᵀx − L⁻¹D‖² = Φ(x) + DᵀQ⁻¹D where Φ(x) = xᵀQx − 2Dᵀx (SPEC §6.3).
+"""
+
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.optimize
+import scipy.sparse
+from scipy.spatial import KDTree
+
+from mgelens.inversion.solve import (
+    InversionError,
+    reconstruction_positive_negative,
+    reconstruction_positive_only,
+    solve_linear_system,
+)
+
+N_MGE = 70
+
+
+def objective(Q, D, x):
+    """Φ(x) = xᵀQx − 2Dᵀx."""
+    return float(x @ Q @ x - 2.0 * D @ x)
+
+
+def scipy_nnls(Q, D):
+    """Oracle: scipy's NNLS on Z = Lᵀ, y = L⁻¹D with Q = L Lᵀ."""
+    L = np.linalg.cholesky(Q)
+    y = scipy.linalg.solve_triangular(L, D, lower=True)
+    x, _ = scipy.optimize.nnls(L.T, y, maxiter=50 * D.size)
+    return x
+
+
+def random_system(seed, n, condition):
+    """Random SPD Q with log-spaced eigenvalues in [1, condition] and D ~ N(0, diag Q)."""
+    rng = np.random.default_rng(seed)
+    V, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    Q = (V * np.logspace(0.0, np.log10(condition), n)) @ V.T
+    Q = 0.5 * (Q + Q.T)
+    return Q, rng.standard_normal(n) * np.sqrt(np.diag(Q))
+
+
+def inversion_like_system(seed=0, n_source=1500, noise=0.05, coefficient=1.0):
+    """(Q, D) of a toy lens inversion with N_MGE + n_source = 1570 unknowns.
+
+    64×64 pixels of 0.05″ in a 1.6″ circular mask, an SIS (θ_E = 1″) maps each pixel to its 3
+    nearest source centres (random traced pixels) with Dirichlet weights; N_MGE circular
+    Gaussians model the lens; all columns blurred by a separable 5×5 Gaussian PSF. Data are a
+    positive truth plus Gaussian noise, H = coefficient × (6-nearest-neighbour graph
+    Laplacian) + 1e−8 I, Q = MᵀM/σ² + blockdiag(1e−3 I, H), D = Mᵀd/σ².
+    """
+    rng = np.random.default_rng(seed)
+    side, pixel = 64, 0.05
+    axis = (np.arange(side) - (side - 1) / 2) * pixel
+    x, y = (grid.ravel() for grid in np.meshgrid(axis, axis))
+    r = np.hypot(x, y)
+    mask = r < 1.6
+    x, y, r = x[mask], y[mask], r[mask]
+    traced = np.column_stack([x - x / r, y - y / r])
+    centres = traced[rng.choice(x.size, n_source, replace=False)]
+    tree = KDTree(centres)
+    _, nearest = tree.query(traced, k=3)
+    weights = rng.dirichlet(np.ones(3), size=x.size)
+    mapping = scipy.sparse.csr_matrix(
+        (weights.ravel(), (np.repeat(np.arange(x.size), 3), nearest.ravel())),
+        shape=(x.size, n_source),
+    )
+    sigmas = np.logspace(-2, np.log10(1.6), N_MGE)
+    gaussians = np.exp(-0.5 * (r[:, None] / sigmas) ** 2) / (2 * np.pi * sigmas**2) * pixel**2
+    taps = np.exp(-0.5 * np.arange(-2, 3) ** 2)
+    row = scipy.sparse.diags(taps / taps.sum(), offsets=np.arange(-2, 3), shape=(side, side))
+    blur = scipy.sparse.kron(row, row).tocsr()[mask][:, mask]
+    M = scipy.sparse.hstack([scipy.sparse.csr_matrix(blur @ gaussians), blur @ mapping]).tocsc()
+    truth = np.concatenate(
+        [
+            5.0 * np.exp(-0.5 * (np.log(sigmas / 0.3) / 0.8) ** 2),
+            np.exp(-0.5 * np.sum((centres - [0.1, -0.05]) ** 2, axis=1) / 0.1**2),
+        ]
+    )
+    data = M @ truth + noise * rng.standard_normal(x.size)
+    _, neighbours = tree.query(centres, k=7)
+    adjacency = scipy.sparse.csr_matrix(
+        (np.ones(6 * n_source), (np.repeat(np.arange(n_source), 6), neighbours[:, 1:].ravel())),
+        shape=(n_source, n_source),
+    )
+    adjacency = ((adjacency + adjacency.T) > 0).astype(float)
+    laplacian = scipy.sparse.diags(np.asarray(adjacency.sum(axis=1)).ravel()) - adjacency
+    H = coefficient * laplacian.toarray() + 1e-8 * np.eye(n_source)
+    Q = (M.T @ M).toarray() / noise**2 + scipy.linalg.block_diag(1e-3 * np.eye(N_MGE), H)
+    return Q, M.T @ data / noise**2
+
+
+@pytest.fixture(scope="module")
+def inversion_system():
+    return inversion_like_system()
+
+
+def assert_kkt(Q, D, result, rtol=1e-9):
+    """x ≥ 0, zero off P; ∇Φ/2 = Qx − D ≥ −tol where x = 0 and ≈ 0 on the passive set."""
+    x = result.x
+    gradient = Q @ x - D
+    scale = np.abs(Q) @ np.abs(x) + np.abs(D)
+    assert np.all(x >= 0.0)
+    assert np.all(x[~result.passive] == 0.0)
+    assert np.all(gradient[x == 0.0] >= -rtol * scale[x == 0.0])
+    assert np.all(np.abs(gradient[x > 0.0]) <= rtol * scale[x > 0.0])
+
+
+def assert_same_minimum(Q, D, x, reference, rtol=1e-8):
+    phi, phi_reference = objective(Q, D, x), objective(Q, D, reference)
+    assert abs(phi - phi_reference) <= rtol * abs(phi_reference)
+
+
+@pytest.mark.parametrize("use_initial_passive", [True, False])
+@pytest.mark.parametrize("n", [10, 50, 200])
+@pytest.mark.parametrize("seed", range(4))
+def test_fnnls_matches_scipy_well_conditioned(seed, n, use_initial_passive):
+    Q, D = random_system(seed, n, condition=1e2)
+    result = reconstruction_positive_only(Q, D, use_initial_passive=use_initial_passive)
+    assert_same_minimum(Q, D, result.x, scipy_nnls(Q, D))
+    assert_kkt(Q, D, result)
+
+
+@pytest.mark.parametrize("condition", [1e8, 1e10])
+@pytest.mark.parametrize("n", [20, 100])
+@pytest.mark.parametrize("seed", range(3))
+def test_fnnls_matches_scipy_ill_conditioned(seed, n, condition):
+    Q, D = random_system(seed, n, condition)
+    result = reconstruction_positive_only(Q, D)
+    assert_same_minimum(Q, D, result.x, scipy_nnls(Q, D))
+    assert np.all(result.x >= 0.0)
+
+
+def test_fnnls_matches_scipy_on_inversion_sized_system(inversion_system):
+    Q, D = inversion_system
+    assert Q.shape == (1570, 1570)
+    result = reconstruction_positive_only(Q, D)
+    assert_same_minimum(Q, D, result.x, scipy_nnls(Q, D))
+    assert_kkt(Q, D, result)
+    # A non-trivial case: many constraints active, outer iterations needed.
+    assert result.n_iterations > 10
+    assert 0.2 < np.mean(result.x == 0.0) < 0.8
+
+
+def test_warm_start_is_made_feasible_before_the_first_gradient():
+    """Q⁻¹D = (−0.19, −1.83, 2.46), so P = {2}, z = (0, 0, 2), and D ≤ 0 on {0, 1}.
+
+    The anchor takes its first gradient at x = 0 (w = D) and stops at once at (0, 0, 2),
+    although D − Qz = (0.5, −1.6, 0) violates optimality. mgelens takes the true gradient
+    at the feasible start and reaches the minimum (2/3, 0, 7/3).
+    """
+    Q = np.array([[1.0, -0.5, -0.5], [-0.5, 1.0, 0.3], [-0.5, 0.3, 1.0]])
+    D = np.array([-0.5, -1.0, 2.0])
+    warm = reconstruction_positive_only(Q, D)
+    np.testing.assert_allclose(warm.x, [2 / 3, 0.0, 7 / 3], rtol=1e-14, atol=1e-15)
+    classic = reconstruction_positive_only(Q, D, use_initial_passive=False)
+    np.testing.assert_allclose(classic.x, warm.x, rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(classic.x, scipy_nnls(Q, D), rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_small_systems_reach_the_nnls_minimum(seed):
+    Q, D = random_system(seed, 10, condition=1e2)
+    assert_same_minimum(Q, D, reconstruction_positive_only(Q, D).x, scipy_nnls(Q, D))
+
+
+def test_explicit_initial_passive_set():
+    Q, D = random_system(7, 60, condition=1e3)
+    reference = scipy_nnls(Q, D)
+    optimal = reconstruction_positive_only(Q, D, initial_passive=reference > 0.0)
+    assert_same_minimum(Q, D, optimal.x, reference)
+    assert_kkt(Q, D, optimal)
+    # any starting set, even everything, ends at the same minimum
+    everything = reconstruction_positive_only(Q, D, initial_passive=np.ones(60, dtype=bool))
+    assert_same_minimum(Q, D, everything.x, reference)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_positive_negative_matches_numpy_solve(seed):
+    Q, D = random_system(seed, 150, condition=1e3)
+    expected = np.linalg.solve(Q, D)
+    x = reconstruction_positive_negative(Q, D)
+    assert np.linalg.norm(x - expected) <= 1e-10 * np.linalg.norm(expected)
+    solution = solve_linear_system(Q, D, positive_only=False)
+    np.testing.assert_array_equal(solution.x, x)
+    assert not solution.positive_only
+    assert not solution.active_zero.any()
+    assert solution.n_iterations == 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_positive_only_has_no_negative_entries(seed):
+    Q, D = random_system(seed, 120, condition=1e4)
+    assert np.any(np.linalg.solve(Q, D) < 0.0)
+    solution = solve_linear_system(Q, D)
+    assert solution.positive_only
+    assert np.all(solution.x >= 0.0)
+    np.testing.assert_array_equal(solution.active_zero, solution.x == 0.0)
+    assert solution.active_zero.any()
+
+
+def test_agrees_exactly_with_unconstrained_when_that_is_non_negative():
+    Q, _ = random_system(3, 80, condition=1e3)
+    D = Q @ np.random.default_rng(3).uniform(0.5, 2.0, 80)
+    unconstrained = solve_linear_system(Q, D, positive_only=False)
+    assert np.all(unconstrained.x > 0.0)
+    constrained = solve_linear_system(Q, D)
+    np.testing.assert_array_equal(constrained.x, unconstrained.x)
+    assert constrained.n_iterations == 0
+    assert not constrained.active_zero.any()
+
+
+def test_fixed_zero_solves_the_reduced_problem():
+    Q, D = random_system(11, 90, condition=1e3)
+    fixed = np.zeros(90, dtype=bool)
+    fixed[::7] = True
+    solution = solve_linear_system(Q, D, fixed_zero=fixed)
+    free = ~fixed
+    reduced = reconstruction_positive_only(Q[np.ix_(free, free)], D[free])
+    assert np.all(solution.x[fixed] == 0.0)
+    np.testing.assert_array_equal(solution.x[free], reduced.x)
+    assert np.all(solution.active_zero[fixed])
+    np.testing.assert_array_equal(solution.active_zero[free], reduced.x == 0.0)
+    assert solution.n_iterations == reduced.n_iterations
+    everything = solve_linear_system(Q, D, fixed_zero=np.ones(90, dtype=bool))
+    assert np.all(everything.x == 0.0)
+    assert everything.active_zero.all()
+
+
+def test_fixed_zero_is_rejected_outside_the_positive_only_path():
+    Q, D = random_system(0, 10, condition=10.0)
+    with pytest.raises(ValueError, match="positive-only"):
+        solve_linear_system(Q, D, positive_only=False, fixed_zero=np.zeros(10, dtype=bool))
+    with pytest.raises(ValueError, match="shape"):
+        solve_linear_system(Q, D, fixed_zero=np.zeros(9, dtype=bool))
+
+
+@pytest.mark.parametrize(
+    "Q",
+    [
+        np.diag([1.0, -1.0, 2.0]),
+        np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+        np.diag([1.0, np.nan, 1.0]),
+    ],
+)
+def test_not_positive_definite_raises(Q):
+    D = np.array([1.0, -1.0, 1.0])
+    with pytest.raises(InversionError):
+        reconstruction_positive_negative(Q, D)
+    with pytest.raises(InversionError):
+        reconstruction_positive_only(Q, D)
+
+
+def test_not_positive_definite_passive_block_raises():
+    Q = np.array([[1.0, 2.0], [2.0, 1.0]])
+    with pytest.raises(InversionError, match="not positive definite"):
+        reconstruction_positive_only(Q, np.ones(2), initial_passive=np.array([True, True]))
+
+
+def test_iteration_caps_raise(inversion_system):
+    Q, D = random_system(1, 200, condition=1e2)
+    needed = reconstruction_positive_only(Q, D, use_initial_passive=False).n_iterations
+    with pytest.raises(InversionError, match="outer iterations"):
+        reconstruction_positive_only(Q, D, use_initial_passive=False, max_iterations=needed - 1)
+    assert needed > 1
+    exact = reconstruction_positive_only(Q, D, use_initial_passive=False, max_iterations=needed)
+    assert exact.n_iterations == needed
+    # The anchor's start leaves many indices to drop in the first outer iteration.
+    with pytest.raises(InversionError, match="inner iterations"):
+        reconstruction_positive_only(*inversion_system, max_iterations=5)
+
+
+def test_pn_sanity_check_rejects_flat_source():
+    Q = np.eye(5)
+    D = np.array([3.0, -1.0, 2.0, 2.0, 2.0])
+    with pytest.raises(InversionError, match="source values are equal"):
+        solve_linear_system(Q, D, positive_only=False, source_block=slice(2, 5))
+    x = solve_linear_system(Q, D, positive_only=False, source_block=slice(1, 5)).x
+    np.testing.assert_array_equal(x, D)
+    # The non-negative path does not apply the check (as in the anchor).
+    np.testing.assert_array_equal(solve_linear_system(Q, D, source_block=slice(2, 5)).x[2:], 2.0)
+
+
+def test_inputs_are_validated_and_not_modified():
+    Q, D = random_system(2, 30, condition=1e3)
+    Q_copy, D_copy = Q.copy(), D.copy()
+    reconstruction_positive_only(np.asfortranarray(Q), D)
+    np.testing.assert_array_equal(Q, Q_copy)
+    np.testing.assert_array_equal(D, D_copy)
+    with pytest.raises(ValueError, match="Q must be"):
+        reconstruction_positive_only(Q, D[:-1])
+    with pytest.raises(ValueError, match="initial_passive"):
+        reconstruction_positive_only(Q, D, initial_passive=np.ones(3, dtype=bool))

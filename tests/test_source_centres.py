@@ -1,0 +1,94 @@
+"""Image-plane mesh centres (SPEC §4.1) and border relocation (§4.2)."""
+
+import numpy as np
+import pytest
+
+from mgelens.grid import pixel_centres, sub_grid
+from mgelens.source.border import border_sub_pixels, edge_pixels, relocate_to_border
+from mgelens.source.image_mesh import (
+    floored_adapt_image,
+    kmeans_centres,
+    kmeans_weights,
+    overlay_centres,
+)
+
+
+@pytest.mark.parametrize(("radius", "count", "spacing"), [(1.8, 904, 0.10735), (1.6, 856, 0.09559)])
+def test_overlay_matches_spec_numbers(radius, count, spacing):
+    x, y = pixel_centres((151, 151), 0.05)
+    mask = np.hypot(x, y) > radius
+    ox, oy = overlay_centres(mask, 0.05, (34, 34))
+    assert ox.size == count
+    assert np.diff(np.unique(np.round(ox, 8)))[0] == pytest.approx(spacing, abs=1e-5)
+    # every kept point lies on an unmasked pixel
+    cols = np.floor(ox / 0.05 + 151 / 2).astype(int)
+    rows = np.floor(oy / 0.05 + 151 / 2).astype(int)
+    assert not mask[rows, cols].any()
+
+
+def test_kmeans_weight_schemes():
+    adapt = np.array([0.0, 0.5, 1.0, 2.0])
+    floored = floored_adapt_image(adapt)
+    assert floored[0] == pytest.approx(0.02)
+    w2023 = kmeans_weights(adapt, weight_floor=0.1, weight_power=2.0)
+    scaled = (floored - 0.02) / (2.0 - 0.02)
+    assert np.allclose(w2023, (scaled + 0.1 * 2.0) ** 2)
+    assert np.allclose(kmeans_weights(adapt, 0.3, 0.0), 1.0)  # p = 0: uniform
+    w2024 = kmeans_weights(adapt, weight_floor=0.2, weight_power=1.0, scheme="2024")
+    assert np.allclose(w2024, np.maximum(floored / 2.0, 0.2))
+    with pytest.raises(ValueError, match="scheme"):
+        kmeans_weights(adapt, 0.1, 1.0, scheme="1999")
+    with pytest.raises(ValueError, match="positive"):
+        floored_adapt_image(np.zeros(3))
+
+
+def test_kmeans_is_deterministic_and_follows_the_weights():
+    x, y = pixel_centres((40, 40), 0.05)
+    x, y = x.ravel(), y.ravel()
+    bright = np.exp(-((x - 0.3) ** 2 + y**2) / (2 * 0.1**2))
+    weights = kmeans_weights(bright, weight_floor=0.0, weight_power=3.0)
+    a = kmeans_centres(x, y, weights, 60, seed=1)
+    b = kmeans_centres(x, y, weights, 60, seed=1)
+    assert np.array_equal(a[0], b[0])
+    assert np.array_equal(a[1], b[1])
+    # centres concentrate where the weights are: most within 0.3" of the bright spot
+    near = np.hypot(a[0] - 0.3, a[1]) < 0.3
+    assert near.mean() > 0.6
+    with pytest.raises(ValueError, match="only"):
+        kmeans_centres(x[:10], y[:10], weights[:10], 20)
+
+
+def test_edge_pixels_and_border_sub_pixels():
+    x, y = pixel_centres((21, 21), 0.1)
+    mask = np.hypot(x, y) > 0.75
+    edges = edge_pixels(mask)
+    used = ~mask
+    rows, cols = np.nonzero(used)
+    expected = []
+    for k, (r, c) in enumerate(zip(rows, cols, strict=True)):
+        window = mask[r - 1 : r + 2, c - 1 : c + 2]
+        if window.any():
+            expected.append(k)
+    assert edges.tolist() == expected
+    grid = sub_grid(x[used], y[used], 0.1, 4)
+    border = border_sub_pixels(mask, grid.x, grid.y, 4, (0.0, 0.0))
+    assert border.size == edges.size
+    r = np.hypot(grid.x, grid.y)
+    for pixel, index in zip(edges, border, strict=True):
+        own = r[pixel * 16 : (pixel + 1) * 16]
+        assert r[index] == own.max()
+
+
+def test_relocation_pulls_outliers_onto_the_border_only():
+    angles = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    bx, by = np.cos(angles), np.sin(angles)  # unit-circle border around the origin
+    px = np.array([0.2, 0.9, 3.0, -2.0, 0.0])
+    py = np.array([0.1, 0.0, 0.0, 2.0, -1.5])
+    new_x, new_y = relocate_to_border(px, py, bx, by)
+    r_new = np.hypot(new_x, new_y)
+    assert np.allclose(new_x[:2], px[:2])
+    assert np.allclose(new_y[:2], py[:2])
+    assert np.allclose(r_new[2:], 1.0, atol=2e-4)
+    # moved radially: direction kept
+    assert np.allclose(np.arctan2(new_y[2:], new_x[2:]), np.arctan2(py[2:], px[2:]))
+    assert px[2] == 3.0  # inputs untouched

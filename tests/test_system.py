@@ -1,0 +1,70 @@
+"""Linear-system assembly (SPEC §6.1) and the mapping matrix (§4.5)."""
+
+import numpy as np
+import pytest
+from scipy import signal, sparse
+
+from mgelens.convolve import Convolver
+from mgelens.grid import pixel_centres
+from mgelens.inversion.system import TilePlan, curvature_matrix, data_vector
+from mgelens.source.mapping import SourceWeights, mapping_matrix
+
+
+def random_weights(rng, n_pixels, n_source, sub=2, per_row=3):
+    rows = []
+    for _ in range(n_pixels * sub * sub):
+        chosen = rng.choice(n_source, size=per_row, replace=False)
+        w = rng.random(per_row)
+        rows.append((chosen, w / w.sum()))
+    indptr = np.concatenate([[0], np.cumsum([len(c) for c, _ in rows])])
+    indices = np.concatenate([c for c, _ in rows])
+    values = np.concatenate([w for _, w in rows])
+    return SourceWeights(indptr, indices, values, sub, n_source), rows
+
+
+def test_mapping_matrix_averages_sub_pixel_weights():
+    rng = np.random.default_rng(6)
+    weights, rows = random_weights(rng, 40, 9)
+    f = mapping_matrix(weights).toarray()
+    assert np.allclose(f.sum(axis=1), 1.0)
+    expected = np.zeros((40, 9))
+    for s, (c, w) in enumerate(rows):
+        expected[s // 4, c] += w / 4
+    assert np.allclose(f, expected)
+
+
+@pytest.mark.parametrize("tile_size", [1, 3, 8])
+def test_curvature_and_data_vector_equal_dense_products(tile_size):
+    rng = np.random.default_rng(4)
+    x, y = pixel_centres((23, 21), 0.1)
+    mask = np.hypot(x - 0.1, y) > 0.95
+    n_pixels = np.count_nonzero(~mask)
+    psf = rng.random((5, 3))
+    psf /= psf.sum()
+    convolver = Convolver(mask, psf)
+    weights, _ = random_weights(rng, n_pixels, 30)
+    f = mapping_matrix(weights)
+    # the blurred mapping matrix column by column, as SPEC §1.4 defines it
+    blurred = np.empty((n_pixels, 30))
+    for j in range(30):
+        native = np.zeros(mask.shape)
+        native[~mask] = f[:, j].toarray().ravel()
+        blurred[:, j] = signal.convolve2d(native, psf, mode="same")[~mask]
+    dense = rng.normal(size=(n_pixels, 4))
+    inverse_variance = rng.uniform(0.5, 2.0, n_pixels)
+    data = rng.normal(size=n_pixels)
+    full = np.hstack([dense, blurred])
+    plan = TilePlan.from_mask(mask, psf, tile_size)
+    operator = convolver.operator(include_blurring=False)
+    curvature = curvature_matrix(dense, f, plan, inverse_variance)
+    expected = full.T @ (inverse_variance[:, None] * full)
+    assert np.allclose(curvature, expected, rtol=1e-12, atol=1e-12)
+    assert np.allclose(curvature, curvature.T)
+    d = data_vector(dense, f, operator, inverse_variance, data)
+    assert np.allclose(d, full.T @ (inverse_variance * data))
+    no_light = curvature_matrix(np.zeros((n_pixels, 0)), f, plan, inverse_variance)
+    assert np.allclose(no_light, expected[4:, 4:], rtol=1e-12, atol=1e-12)
+    only_light = curvature_matrix(dense, None, None, inverse_variance)
+    assert np.allclose(only_light, expected[:4, :4])
+    assert np.allclose(data_vector(dense, None, None, inverse_variance, data), d[:4])
+    assert sparse.issparse(operator)
