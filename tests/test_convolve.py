@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from mgelens.convolve import Convolver, convolve_image
+from mgelens.convolve import Convolver, convolve_image, trimmed_psf
 from mgelens.grid import pixel_centres
 
 
@@ -83,3 +83,19 @@ def test_bad_inputs_raise(asymmetric_psf):
         conv.blur_columns(np.ones((5, 2)))
     with pytest.raises(ValueError, match="method"):
         convolve_image(np.ones((5, 5)), asymmetric_psf, method="magic")
+
+
+def test_trimmed_psf_keeps_the_kernel_above_the_floor():
+    yy, xx = np.mgrid[:21, :21] - 10
+    psf = np.exp(-(xx**2 + yy**2) / 2.0)
+    psf /= psf.sum()
+    trimmed = trimmed_psf(psf, 1e-10)
+    # exp(-r²/2) ≥ 1e-10 reaches r = 6.79 pixels along the axes: a 13×13 kernel
+    assert trimmed.shape == (13, 13)
+    assert np.array_equal(trimmed, psf[4:17, 4:17])
+    assert psf.sum() - trimmed.sum() < 1e-9
+    assert trimmed_psf(psf, 0.0).shape == (21, 21)
+    asymmetric = np.zeros((7, 9))
+    asymmetric[3, 4] = 1.0
+    asymmetric[3, 5] = 1e-3
+    assert trimmed_psf(asymmetric, 1e-6).shape == (1, 3)

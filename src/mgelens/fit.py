@@ -18,6 +18,7 @@ import numpy as np
 from scipy import sparse
 
 from mgelens import mass as mass_module
+from mgelens.convolve import trimmed_psf
 from mgelens.grid import SubGrid, pixel_centres, sub_grid, to_native
 from mgelens.imaging import Imaging
 from mgelens.inversion.evidence import (
@@ -63,6 +64,10 @@ class FitSettings:
         μ added to the curvature diagonal of unregularized linear columns (1e−3).
     force_edge_pixels_to_zero : bool
         Fix convex-hull source pixels to zero in the non-negative solve (SPEC §6.3).
+    psf_trim : float
+        The PSF is cut to the smallest centred kernel holding every entry ≥ this fraction
+        of its peak (:func:`mgelens.convolve.trimmed_psf`; 0 keeps it whole). The default
+        1e−10 only removes wings that cannot change a model image.
     """
 
     positive_only: bool = True
@@ -73,6 +78,7 @@ class FitSettings:
     use_border: bool = True
     mge_diagonal: float = 1e-3
     force_edge_pixels_to_zero: bool = True
+    psf_trim: float = 1e-10
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,7 +121,7 @@ class FitDataset:
             )
         light_grid = LightGrid.from_mask(
             mask,
-            imaging.psf,
+            trimmed_psf(imaging.psf, settings.psf_trim),
             imaging.pixel_scale,
             centre=light_centre,
             sub_size=settings.lp_sub_size,
@@ -161,7 +167,7 @@ class FitDataset:
     @cached_property
     def tile_plan(self) -> TilePlan:
         """Tiling of the masked pixels for the source curvature matrix."""
-        return TilePlan.from_mask(self.mask, self.imaging.psf)
+        return TilePlan.from_mask(self.mask, self.convolver.psf)
 
     def lens_light_columns(self, sets: tuple[MGESet, ...]) -> np.ndarray:
         """PSF-convolved unit columns of the lens-light sets (N_I, Σ N_g), cached.

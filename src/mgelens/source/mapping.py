@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
+from mgelens._jit import njit
+
 
 @dataclass(frozen=True)
 class SourceWeights:
@@ -47,11 +49,34 @@ class SourceWeights:
 
 
 def mapping_matrix(weights: SourceWeights) -> sparse.csr_matrix:
-    """Sparse f (N_I × N_S): sub-pixel weights averaged over each image pixel."""
-    f = sparse.csr_matrix(
-        (weights.values / weights.sub_size**2, (weights.pixel_of_entry, weights.indices)),
-        shape=(weights.n_pixels, weights.n_source),
+    """Sparse f (N_I × N_S), column indices sorted: sub-pixel weights averaged per pixel."""
+    indptr, indices, values = _merge_sub_pixels(
+        weights.indptr, weights.indices, weights.values, weights.sub_size**2, weights.n_source
     )
-    f.sum_duplicates()
-    return f
+    return sparse.csr_matrix((values, indices, indptr), shape=(weights.n_pixels, weights.n_source))
 
+
+@njit
+def _merge_sub_pixels(indptr, indices, values, n_sub, n_source):
+    n_pixels = (indptr.size - 1) // n_sub
+    out_indptr = np.zeros(n_pixels + 1, dtype=np.int64)
+    out_indices = np.empty(indices.size, dtype=np.int64)
+    out_values = np.empty(indices.size)
+    accumulated = np.zeros(n_source)
+    seen = np.full(n_source, -1, dtype=np.int64)
+    count = 0
+    for pixel in range(n_pixels):
+        start = count
+        for p in range(indptr[pixel * n_sub], indptr[(pixel + 1) * n_sub]):
+            j = indices[p]
+            if seen[j] != pixel:
+                seen[j] = pixel
+                accumulated[j] = 0.0
+                out_indices[count] = j
+                count += 1
+            accumulated[j] += values[p]
+        out_indices[start:count] = np.sort(out_indices[start:count])
+        for q in range(start, count):
+            out_values[q] = accumulated[out_indices[q]] / n_sub
+        out_indptr[pixel + 1] = count
+    return out_indptr, out_indices[:count], out_values[:count]
