@@ -19,6 +19,7 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/mocks.smk"
 include: "workflow/rules/plots.smk"
 include: "workflow/rules/analysis.smk"
+include: "workflow/rules/slam.smk"
 
 
 report: "workflow/report/workflow.rst"

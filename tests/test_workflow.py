@@ -53,6 +53,19 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert not list(tmp_path.iterdir()) or {p.name for p in tmp_path.iterdir()} <= {".snakemake"}
 
 
+def test_dry_run_of_one_lens_slam_chain_runs_five_phases(tmp_path):
+    result = snakemake("-n", "-p", "results/M2/mass/result.json", workdir=tmp_path)
+    assert result.returncode == 0, result.stderr
+    output = result.stdout + result.stderr
+    counts = job_counts(output)
+    assert counts["phase"] == 5
+    assert counts["simulate_mock"] == 1
+    for phase in ("sp", "spix1", "spix2", "light", "mass"):
+        assert f"mgelens phase {phase} " in output
+    # the sheet's mask radius, MGE complexity and point set reach the command line
+    assert "--mask-radius 1.6 --mge-sets 4 --point-set yes --profile quick" in output
+
+
 def test_dry_run_of_the_population_sample(tmp_path):
     result = snakemake("-n", "--configfile", "config/population.yaml", workdir=tmp_path)
     assert result.returncode == 0, result.stderr

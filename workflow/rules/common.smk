@@ -154,3 +154,33 @@ def all_targets() -> list[str]:
     if (LENSES["kind"] == "mock").any():
         targets += ["results/summary/lenses.csv", "results/summary/histograms.png"]
     return targets
+
+
+# SLaM phases (workflow/rules/slam.smk)
+
+PHASES = ["sp", "spix1", "spix2", "light", "mass"]
+
+
+wildcard_constraints:
+    phase="|".join(PHASES),
+
+
+def phase_inputs(wildcards) -> dict:
+    """Imaging files of the lens and the result files of the phases before this one."""
+    files = imaging_files(wildcards)
+    for earlier in PHASES[: PHASES.index(wildcards.phase)]:
+        files[earlier] = f"results/{wildcards.lens}/{earlier}/result.json"
+    return files
+
+
+def phase_options(wildcards) -> str:
+    """Per-lens CLI options from the sample sheet."""
+    row = LENSES.loc[wildcards.lens]
+    return (
+        f"--mask-radius {row['mask_radius']} --mge-sets {row['mge_sets']} "
+        f"--point-set {row['point_set']} --profile {config['slam']['profile']}"
+    )
+
+
+def phase_mem_mb(wildcards, attempt) -> int:
+    return 4000 * attempt

@@ -1,0 +1,41 @@
+"""The SLaM chain of phases SP → SPix1 → SPix2 → LIGHT → MASS (SPEC §8).
+
+* :mod:`~mgelens.pipeline.settings`: phase settings, the ``quick`` and ``paper`` profiles,
+  YAML loading (``slam:`` section);
+* :mod:`~mgelens.pipeline.models`: parameter spaces of the phases and the mapping of
+  parameter values onto profiles;
+* :mod:`~mgelens.pipeline.phases`: the phases as functions, file in → file out;
+* :mod:`~mgelens.pipeline.products`: ``model.fits`` and the adapt image.
+"""
+
+from mgelens.pipeline.phases import (
+    PhaseInputError,
+    lens_light_model,
+    limit_threads,
+    mass_model,
+    read_phase,
+    run_phase,
+)
+from mgelens.pipeline.settings import (
+    PHASES,
+    PROFILES,
+    SettingsError,
+    SlamSettings,
+    load_settings,
+    profile_settings,
+)
+
+__all__ = [
+    "PHASES",
+    "PROFILES",
+    "PhaseInputError",
+    "SettingsError",
+    "SlamSettings",
+    "lens_light_model",
+    "limit_threads",
+    "load_settings",
+    "mass_model",
+    "profile_settings",
+    "read_phase",
+    "run_phase",
+]

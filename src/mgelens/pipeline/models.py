@@ -1,0 +1,472 @@
+"""Parameter spaces of the five SLaM phases and the mapping of a values dict onto profiles.
+
+Parameter names (stable, dotted; SPEC §8.1):
+
+* lens light, one MGE set per ``<set>`` = ``set_0``, ``set_1``, ... (30 Gaussians) or
+  ``point`` (10 Gaussians): ``lens_light.<set>.centre_x``, ``.centre_y``, ``.ell_comps_1``,
+  ``.ell_comps_2``. The extended sets share one centre: the centres of ``set_1``, ... are
+  tied to those of ``set_0``. The point set has its own centre.
+* mass: ``mass.centre_x``, ``mass.centre_y``, ``mass.ell_comps_1``, ``mass.ell_comps_2``,
+  ``mass.einstein_radius`` and, for the EPL, ``mass.slope`` (without it the profile is the
+  SIE); external shear ``shear.gamma_1``, ``shear.gamma_2``.
+* SP source MGE: ``source.set_0.centre_x``, ... (20 Gaussians, σ 0.01″–1.0″).
+* pixelized source: ``regularization.coefficient`` (constant schemes) or
+  ``regularization.inner_coefficient``, ``.outer_coefficient``, ``.signal_scale``
+  (AdaptiveBrightnessSplit); k-means mesh ``mesh.weight_floor``, ``mesh.weight_power``.
+
+Coordinates in arcsec, ell_comps = (f cos 2φ, f sin 2φ) with φ CCW from +x (SPEC §2.1).
+Every phase's space also lists the parameters it keeps fixed (at an earlier phase's
+maximum-likelihood values), so a result file describes its whole model.
+"""
+
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from sklearn.exceptions import ConvergenceWarning
+
+from mgelens.fit import LensModel, MGESource, PixelizedSource
+from mgelens.light import MGESet, log_spaced_sigmas
+from mgelens.mass import EPL, SIE, SLOPE_RANGE, ExternalShear
+from mgelens.search.model import Parameter, ParameterSpace
+from mgelens.search.priors import Gaussian, LogUniform, Prior, TruncatedGaussian, Uniform
+from mgelens.search.results import PhaseResult, passed_priors
+from mgelens.source.image_mesh import kmeans_centres, kmeans_weights
+from mgelens.source.regularization import AdaptiveBrightnessSplit, Constant, ConstantSplit
+
+LENS_LIGHT, MASS, SHEAR, SOURCE = "lens_light", "mass", "shear", "source"
+MESH, REGULARIZATION = "mesh", "regularization"
+
+SOURCE_MGE_SIGMAS = log_spaced_sigmas(0.01, 1.0, 20)
+"""σ (arcsec) of the SP source MGE: 20 Gaussians from 0.01″ to 1.0″ (SPEC §2.4)."""
+
+ELL_COMPS_PRIOR = TruncatedGaussian(0.0, 0.3, -1.0, 1.0)
+"""Anchor ell_comps prior, N(0, 0.3) on [−1, 1] (SPEC §2.4, §3.1)."""
+LIGHT_PHASE_ELL_COMPS_PRIOR = Uniform(-0.7, 0.7)
+"""ell_comps of the extended sets in the LIGHT phase (SPEC §8.1)."""
+LIGHT_PHASE_CENTRE_HALF_WIDTH = 0.1
+"""LIGHT-phase centres are U(c_SP ± 0.1″) (SPEC §8.1)."""
+EINSTEIN_RADIUS_PRIOR = Uniform(0.0, 8.0)
+SHEAR_PRIOR = Uniform(-0.2, 0.2)
+SLOPE_PRIOR = Uniform(1.5, 3.0)
+COEFFICIENT_PRIOR = LogUniform(1e-6, 1e6)
+
+PASSED_MASS_NAMES = (
+    "mass.centre_x",
+    "mass.centre_y",
+    "mass.ell_comps_1",
+    "mass.ell_comps_2",
+    "mass.einstein_radius",
+    "shear.gamma_1",
+    "shear.gamma_2",
+)
+"""Parameters passed SP → SPix1 and SPix1 → MASS (SIE → EPL: the shared ones, SPEC §8.2)."""
+
+
+class UnphysicalSample(ValueError):
+    """Parameter values the profiles cannot represent (e.g. an EPL slope ≥ 2.8)."""
+
+
+# -- lens light -------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class LightSetSpec:
+    """One MGE set of the lens light: its name (``set_<k>`` or ``point``) and fixed σ.
+
+    ``sigmas`` are the anchor's minor-axis dispersions in arcsec (SPEC §2.2).
+    """
+
+    name: str
+    sigmas: np.ndarray
+
+    @property
+    def prefix(self) -> str:
+        return f"{LENS_LIGHT}.{self.name}"
+
+
+def mge_specs(
+    n_sets: int, point_set: bool, pixel_scale: float, mask_radius: float
+) -> tuple[LightSetSpec, ...]:
+    """``n_sets`` extended sets (30 Gaussians, σ from Δ/5 to the mask radius) + point set."""
+    extended = MGESet.extended((0.0, 0.0), (0.0, 0.0), pixel_scale, mask_radius).sigmas
+    specs = [LightSetSpec(f"set_{k}", extended) for k in range(n_sets)]
+    if point_set:
+        specs.append(
+            LightSetSpec("point", MGESet.point((0.0, 0.0), (0.0, 0.0), pixel_scale).sigmas)
+        )
+    return tuple(specs)
+
+
+def _geometry(prefix: str, centre: Sequence[Prior], ell_comps: Sequence[Prior]) -> list[Parameter]:
+    names = ("centre_x", "centre_y", "ell_comps_1", "ell_comps_2")
+    priors = (*centre, *ell_comps)
+    return [Parameter(f"{prefix}.{n}", prior=p) for n, p in zip(names, priors, strict=True)]
+
+
+def lens_light_parameters(
+    specs: Sequence[LightSetSpec],
+    centre: Sequence[Prior],
+    ell_comps: Prior,
+    point_centre: Sequence[Prior] = (),
+    point_ell_comps: Prior = ELL_COMPS_PRIOR,
+) -> list[Parameter]:
+    """Free lens-light geometry: one shared centre for the extended sets (later sets' centres
+    tied to ``set_0``), own ell_comps per set; the point set has its own centre and ell_comps.
+    """
+    parameters: list[Parameter] = []
+    first = None
+    for spec in specs:
+        if spec.name == "point":
+            parameters += _geometry(spec.prefix, point_centre, (point_ell_comps,) * 2)
+            continue
+        geometry = _geometry(spec.prefix, centre, (ell_comps,) * 2)
+        if first is None:
+            first = spec.prefix
+        else:
+            geometry[:2] = [
+                Parameter(f"{spec.prefix}.{n}", tied_to=f"{first}.{n}")
+                for n in ("centre_x", "centre_y")
+            ]
+        parameters += geometry
+    return parameters
+
+
+def lens_light_sets(
+    values: Mapping[str, float], specs: Sequence[LightSetSpec]
+) -> tuple[MGESet, ...]:
+    """The MGE sets of ``specs`` with centres and ell_comps from ``values``."""
+    return tuple(
+        MGESet(
+            (values[f"{s.prefix}.centre_x"], values[f"{s.prefix}.centre_y"]),
+            (values[f"{s.prefix}.ell_comps_1"], values[f"{s.prefix}.ell_comps_2"]),
+            s.sigmas,
+        )
+        for s in specs
+    )
+
+
+# -- mass -------------------------------------------------------------------------------
+def sp_mass_priors(centre: tuple[float, float] = (0.0, 0.0)) -> dict[str, Prior]:
+    """Anchor priors of SIE + shear (SPEC §3.1, §3.2): centre N(c, 0.1″), ell_comps
+    N(0, 0.3) on [−1, 1], θ_E U(0, 8″), γ₁, γ₂ U(−0.2, 0.2)."""
+    return {
+        "mass.centre_x": Gaussian(centre[0], 0.1),
+        "mass.centre_y": Gaussian(centre[1], 0.1),
+        "mass.ell_comps_1": ELL_COMPS_PRIOR,
+        "mass.ell_comps_2": ELL_COMPS_PRIOR,
+        "mass.einstein_radius": EINSTEIN_RADIUS_PRIOR,
+        "shear.gamma_1": SHEAR_PRIOR,
+        "shear.gamma_2": SHEAR_PRIOR,
+    }
+
+
+def mass_profiles(values: Mapping[str, float]) -> tuple:
+    """(SIE or EPL, ExternalShear) from ``values``; EPL iff ``mass.slope`` is present.
+
+    Raises
+    ------
+    UnphysicalSample
+        If the slope lies outside the EPL's valid range (1.2, 2.8) (:data:`SLOPE_RANGE`).
+    """
+    centre = (values["mass.centre_x"], values["mass.centre_y"])
+    ell_comps = (values["mass.ell_comps_1"], values["mass.ell_comps_2"])
+    einstein_radius = values["mass.einstein_radius"]
+    shear = ExternalShear(values["shear.gamma_1"], values["shear.gamma_2"])
+    if "mass.slope" not in values:
+        return SIE.from_ell_comps(centre, ell_comps, einstein_radius), shear
+    slope = values["mass.slope"]
+    if not SLOPE_RANGE[0] < slope < SLOPE_RANGE[1]:
+        raise UnphysicalSample(f"EPL slope {slope} outside {SLOPE_RANGE}")
+    return EPL.from_ell_comps(centre, ell_comps, einstein_radius, slope), shear
+
+
+# -- sources ----------------------------------------------------------------------------
+def regularization_from(values: Mapping[str, float], scheme: str, offset: str = "anchor"):
+    """Regularization object of ``scheme`` ("constant", "constant_split", "adaptive_split")."""
+    if scheme == "constant":
+        return Constant(values["regularization.coefficient"])
+    if scheme == "constant_split":
+        return ConstantSplit(values["regularization.coefficient"], offset)
+    if scheme == "adaptive_split":
+        return AdaptiveBrightnessSplit(
+            values["regularization.inner_coefficient"],
+            values["regularization.outer_coefficient"],
+            values["regularization.signal_scale"],
+            offset,
+        )
+    raise ValueError(f"unknown regularization scheme {scheme!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class MGESourceModel:
+    """SP source: one MGE set in the source plane (:data:`SOURCE_MGE_SIGMAS`)."""
+
+    sigmas: np.ndarray = field(default_factory=SOURCE_MGE_SIGMAS.copy)
+
+    def build(self, values: Mapping[str, float]) -> MGESource:
+        p = f"{SOURCE}.set_0"
+        centre = (values[f"{p}.centre_x"], values[f"{p}.centre_y"])
+        ell_comps = (values[f"{p}.ell_comps_1"], values[f"{p}.ell_comps_2"])
+        return MGESource((MGESet(centre, ell_comps, self.sigmas),))
+
+    def describe(self) -> dict:
+        return {"kind": "mge", "sigmas": self.sigmas.tolist()}
+
+
+@dataclass(frozen=True, eq=False)
+class MeshSourceModel:
+    """Pixelized source on fixed image-plane centres (overlay or a fixed k-means mesh).
+
+    Attributes
+    ----------
+    x, y : ndarray
+        Image-plane mesh centres (arcsec).
+    regularization : str
+        Scheme for :func:`regularization_from`.
+    interpolation, offset : str
+        Source interpolation and cross offset (SPEC §4.4, §5.3).
+    adapt_image : ndarray or None
+        Slim adapt image (needed by adaptive schemes).
+    mesh : str
+        "overlay" or "kmeans", for the record.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    regularization: str
+    interpolation: str = "natural_neighbour"
+    offset: str = "anchor"
+    adapt_image: np.ndarray | None = None
+    mesh: str = "overlay"
+
+    def build(self, values: Mapping[str, float]) -> PixelizedSource:
+        return PixelizedSource(
+            self.x,
+            self.y,
+            regularization_from(values, self.regularization, self.offset),
+            self.interpolation,
+            self.adapt_image,
+        )
+
+    def describe(self) -> dict:
+        return {
+            "kind": "pixelized",
+            "mesh": self.mesh,
+            "n_pixels": int(self.x.size),
+            "regularization": self.regularization,
+            "interpolation": self.interpolation,
+            "cross_offset": self.offset,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class KMeansSourceModel:
+    """SPix2 source: k-means mesh recomputed from ``mesh.weight_floor`` and
+    ``mesh.weight_power`` for every sample (fixed seed), AdaptiveBrightnessSplit.
+
+    Attributes
+    ----------
+    pixel_x, pixel_y : ndarray
+        Unmasked pixel centres (arcsec), the points k-means clusters.
+    adapt_image : ndarray
+        Slim adapt image Ξ (SPix1's lensed source model).
+    n_pixels, seed : int
+        Clusters and k-means seed.
+    scheme : {"2023", "2024"}
+        Weight formula (SPEC §4.1).
+    interpolation, offset : str
+    """
+
+    pixel_x: np.ndarray
+    pixel_y: np.ndarray
+    adapt_image: np.ndarray
+    n_pixels: int
+    seed: int = 0
+    scheme: str = "2023"
+    interpolation: str = "natural_neighbour"
+    offset: str = "anchor"
+
+    def centres(self, values: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        """Image-plane k-means centres for the weight hyper-parameters in ``values``.
+
+        sklearn's warning that fewer distinct clusters than requested were found is
+        silenced: the duplicated centres make the mesh degenerate, which rejects the sample.
+        """
+        weights = kmeans_weights(
+            self.adapt_image, values["mesh.weight_floor"], values["mesh.weight_power"], self.scheme
+        )
+        if not (np.all(np.isfinite(weights)) and weights.sum() > 0):
+            raise UnphysicalSample("k-means weights are not finite and positive")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            return kmeans_centres(self.pixel_x, self.pixel_y, weights, self.n_pixels, self.seed)
+
+    def mesh_model(self, values: Mapping[str, float]) -> MeshSourceModel:
+        """The k-means mesh of ``values`` with the adaptive split regularization."""
+        x, y = self.centres(values)
+        return MeshSourceModel(
+            x, y, "adaptive_split", self.interpolation, self.offset, self.adapt_image, "kmeans"
+        )
+
+    def fixed(self, values: Mapping[str, float]) -> "FixedSourceModel":
+        """Mesh and regularization of ``values`` frozen (LIGHT and MASS keep SPix2's source)."""
+        mesh = self.mesh_model(values)
+        return FixedSourceModel(mesh.build(values), {**self.describe(), "fixed": True})
+
+    def build(self, values: Mapping[str, float]) -> PixelizedSource:
+        return self.mesh_model(values).build(values)
+
+    def describe(self) -> dict:
+        return {
+            "kind": "pixelized",
+            "mesh": "kmeans",
+            "n_pixels": self.n_pixels,
+            "kmeans_seed": self.seed,
+            "kmeans_scheme": self.scheme,
+            "regularization": "adaptive_split",
+            "interpolation": self.interpolation,
+            "cross_offset": self.offset,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class FixedSourceModel:
+    """A pixelized source fixed for a whole phase: every sample gets the same object, so a
+    fit may reuse whatever it derived from it for an unchanged mass model."""
+
+    source: PixelizedSource
+    description: dict
+
+    def build(self, values: Mapping[str, float]) -> PixelizedSource:
+        return self.source
+
+    def describe(self) -> dict:
+        return dict(self.description)
+
+
+SourceModel = MGESourceModel | MeshSourceModel | KMeansSourceModel | FixedSourceModel
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseModel:
+    """Maps a values dict onto a :class:`~mgelens.fit.LensModel` (picklable)."""
+
+    lens_light: tuple[LightSetSpec, ...]
+    source: SourceModel
+
+    def build(self, values: Mapping[str, float]) -> LensModel:
+        """Lens model of ``values``; raises :class:`UnphysicalSample` for invalid values."""
+        return LensModel(
+            mass=mass_profiles(values),
+            lens_light=lens_light_sets(values, self.lens_light),
+            source=self.source.build(values),
+        )
+
+    def describe(self) -> dict:
+        """Structure of the model for result files."""
+        return {
+            "lens_light": [{"name": s.name, "n_gaussians": s.sigmas.size} for s in self.lens_light],
+            "source": self.source.describe(),
+        }
+
+
+# -- parameter spaces of the phases -----------------------------------------------------
+def frozen_component(previous: PhaseResult, component: str) -> list[Parameter]:
+    """Parameters of ``component`` (e.g. "lens_light") fixed at ``previous``'s max-L values;
+    ties are kept."""
+    values = previous.max_likelihood
+    return [
+        Parameter(p.name, tied_to=p.tied_to, limits=p.limits)
+        if p.tied_to is not None
+        else Parameter(p.name, value=values[p.name], limits=p.limits)
+        for p in previous.space.parameters
+        if p.name.startswith(component + ".")
+    ]
+
+
+def _free(priors: Mapping[str, Prior]) -> list[Parameter]:
+    return [Parameter(name, prior=prior) for name, prior in priors.items()]
+
+
+def sp_space(
+    specs: Sequence[LightSetSpec], centre: tuple[float, float] = (0.0, 0.0)
+) -> ParameterSpace:
+    """SP: MGE lens light (shared centre N(c, 0.3″), ell_comps N(0, 0.3)), SIE + shear,
+    1×20 source MGE (centre N(c, 0.3″)): 6 + 7 + 4 = 17 free parameters for 2 sets."""
+    wide = (Gaussian(centre[0], 0.3), Gaussian(centre[1], 0.3))
+    light = lens_light_parameters(specs, wide, ELL_COMPS_PRIOR)
+    source = _geometry(f"{SOURCE}.set_0", wide, (ELL_COMPS_PRIOR,) * 2)
+    return ParameterSpace((*light, *_free(sp_mass_priors(centre)), *source))
+
+
+def spix1_space(sp: PhaseResult, rule: str = "paper") -> ParameterSpace:
+    """SPix1: lens light fixed at SP's max-L, SIE + shear passed from SP, one regularization
+    coefficient (Constant or ConstantSplit) LogUniform(1e−6, 1e6): 8 free parameters."""
+    mass = passed_priors(sp, PASSED_MASS_NAMES, rule)
+    coefficient = {"regularization.coefficient": COEFFICIENT_PRIOR}
+    return ParameterSpace((*frozen_component(sp, LENS_LIGHT), *_free(mass), *_free(coefficient)))
+
+
+def spix2_space(sp: PhaseResult, spix1: PhaseResult) -> ParameterSpace:
+    """SPix2: lens light fixed (SP), mass fixed (SPix1); W_floor U(0, 1), p U(0, 20),
+    λ_in, λ_out LogUniform(1e−6, 1e6), κ_s U(0, 1): 5 free parameters."""
+    hyper = {
+        "mesh.weight_floor": Uniform(0.0, 1.0),
+        "mesh.weight_power": Uniform(0.0, 20.0),
+        "regularization.inner_coefficient": COEFFICIENT_PRIOR,
+        "regularization.outer_coefficient": COEFFICIENT_PRIOR,
+        "regularization.signal_scale": Uniform(0.0, 1.0),
+    }
+    return ParameterSpace(
+        (
+            *frozen_component(sp, LENS_LIGHT),
+            *frozen_component(spix1, MASS),
+            *frozen_component(spix1, SHEAR),
+            *_free(hyper),
+        )
+    )
+
+
+def light_centre(result: PhaseResult) -> tuple[float, float]:
+    """Max-likelihood centre of the extended lens-light sets of ``result``."""
+    values = result.max_likelihood
+    return values["lens_light.set_0.centre_x"], values["lens_light.set_0.centre_y"]
+
+
+def light_space(
+    specs: Sequence[LightSetSpec], sp: PhaseResult, spix1: PhaseResult, spix2: PhaseResult
+) -> ParameterSpace:
+    """LIGHT: MGE refit with centres U(c_SP ± 0.1″), extended ell_comps U(−0.7, 0.7),
+    point-set ell_comps N(0, 0.3) on [−1, 1]; mass fixed (SPix1), source fixed (SPix2):
+    2 + 2 N_sets (+ 4 with the point set) free parameters."""
+    cx, cy = light_centre(sp)
+    h = LIGHT_PHASE_CENTRE_HALF_WIDTH
+    centre = (Uniform(cx - h, cx + h), Uniform(cy - h, cy + h))
+    light = lens_light_parameters(specs, centre, LIGHT_PHASE_ELL_COMPS_PRIOR, centre)
+    return ParameterSpace(
+        (
+            *light,
+            *frozen_component(spix1, MASS),
+            *frozen_component(spix1, SHEAR),
+            *frozen_component(spix2, MESH),
+            *frozen_component(spix2, REGULARIZATION),
+        )
+    )
+
+
+def mass_space(
+    light: PhaseResult, spix1: PhaseResult, spix2: PhaseResult, rule: str = "paper"
+) -> ParameterSpace:
+    """MASS: lens light fixed (LIGHT), EPL + shear with centre, ell_comps, θ_E and shear
+    passed from SPix1 and γ U(1.5, 3.0), source fixed (SPix2): 8 free parameters."""
+    passed = passed_priors(spix1, PASSED_MASS_NAMES, rule)
+    mass = {n: p for n, p in passed.items() if n.startswith(MASS + ".")}
+    shear = {n: p for n, p in passed.items() if n.startswith(SHEAR + ".")}
+    return ParameterSpace(
+        (
+            *frozen_component(light, LENS_LIGHT),
+            *_free({**mass, "mass.slope": SLOPE_PRIOR, **shear}),
+            *frozen_component(spix2, MESH),
+            *frozen_component(spix2, REGULARIZATION),
+        )
+    )

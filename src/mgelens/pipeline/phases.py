@@ -1,0 +1,566 @@
+"""The five SLaM phases (SPEC §8.1) as functions: lens folder + earlier phase folders in,
+one phase folder out.
+
+``run_phase(name, lens_dir, results_dir, settings)`` fits phase ``name`` ("sp", "spix1",
+"spix2", "light", "mass") to the imaging in ``lens_dir`` (``data.fits``,
+``noise_map.fits``, ``psf.fits``) and writes ``results_dir/<name>/``:
+
+* ``result.json`` and ``samples.csv`` (:class:`~mgelens.search.results.PhaseResult`), with
+  an extra ``max_likelihood_fit`` block in ``result.json``: the maximum-likelihood model
+  with its solved MGE intensities, mass profiles and source hyper-parameters, enough to
+  rebuild the lens light (:func:`lens_light_model`) and the mass (:func:`mass_model`) from
+  the JSON alone;
+* ``model.fits`` (:mod:`mgelens.pipeline.products`); SPix1 also writes
+  ``adapt_image.fits``, its lensed-source model, which SPix2, LIGHT and MASS use;
+* ``phase.log`` (appended to on every run) and, while sampling, the sampler's checkpoint
+  ``checkpoint-<hash>.pickle``. The hash covers the parameter space, sampler settings,
+  seed, fit settings and input checksums: a rerun with the same inputs resumes, a rerun
+  with changed inputs starts afresh. The checkpoint is deleted once the results are in.
+
+A phase reads only earlier phases' ``result.json`` (and SPix1's adapt image), so any phase
+can be rerun alone. Every file is written atomically, ``result.json`` last.
+
+Chain (SPEC §8.1): SP (MGE lens light, SIE + shear, MGE source) → SPix1 (lens light fixed,
+SIE + shear passed, overlay mesh) → SPix2 (lens light and mass fixed, k-means mesh
+hyper-parameters) → LIGHT (MGE refit, mass and source fixed) → MASS (lens light and source
+fixed, EPL + shear).
+"""
+
+import contextlib
+import dataclasses
+import hashlib
+import importlib.util
+import json
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numba
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from mgelens import mask as mask_module
+from mgelens.atomic import atomic_path, write_json
+from mgelens.fit import FitDataset, FitResult, FitSettings, figure_of_merit, fit
+from mgelens.geometry import axis_ratio_and_angle_from
+from mgelens.grid import pixel_centres
+from mgelens.imaging import Imaging
+from mgelens.light import MGESet
+from mgelens.mass import EPL, SIE, ExternalShear
+from mgelens.pipeline import models, products
+from mgelens.pipeline.settings import PHASES, SlamSettings
+from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
+from mgelens.search.model import ParameterSpace
+from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
+from mgelens.search.sampler import SamplerSettings, run_nested
+from mgelens.source.image_mesh import overlay_centres
+
+logger = logging.getLogger("mgelens.pipeline")
+
+MODEL_FILE = "model.fits"
+ADAPT_IMAGE_FILE = "adapt_image.fits"
+LOG_FILE = "phase.log"
+CHECKPOINT_PREFIX = "checkpoint-"
+IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", "mask.fits")
+MASS_TYPES = {"SIE": SIE, "EPL": EPL, "ExternalShear": ExternalShear}
+
+
+class PhaseInputError(ValueError):
+    """A phase's inputs are missing or inconsistent; the message names the file and fix."""
+
+
+# -- threads and logging ----------------------------------------------------------------
+def limit_threads(threads: int) -> None:
+    """Use ``threads`` threads for numba kernels and for BLAS/OpenMP (numpy, scikit-learn).
+
+    Snakemake sets ``OMP_NUM_THREADS`` and friends but not numba's thread count, and
+    libraries loaded before those variables were read ignore them, so both are set here.
+    """
+    if threads < 1:
+        raise ValueError(f"threads must be >= 1, got {threads}")
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    threadpool_limits(limits=threads)
+
+
+@contextlib.contextmanager
+def _phase_log(folder: Path) -> Iterator[None]:
+    """Copy ``mgelens`` log records of INFO and above into ``folder/phase.log``."""
+    handler = logging.FileHandler(folder / LOG_FILE)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    handler.setLevel(logging.INFO)
+    package = logging.getLogger("mgelens")
+    level = package.level
+    if package.getEffectiveLevel() > logging.INFO:
+        package.setLevel(logging.INFO)
+    package.addHandler(handler)
+    try:
+        yield
+    finally:
+        package.removeHandler(handler)
+        package.setLevel(level)
+        handler.close()
+
+
+# -- inputs -----------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class EarlierPhase:
+    """A finished phase read from its folder: result and maximum-likelihood fit record."""
+
+    folder: Path
+    result: PhaseResult
+    record: dict
+
+    @property
+    def files(self) -> list[Path]:
+        return [self.folder / RESULT_FILE, self.folder / SAMPLES_FILE]
+
+    @property
+    def lens_light_specs(self) -> tuple[models.LightSetSpec, ...]:
+        return tuple(
+            models.LightSetSpec(s["name"], np.asarray(s["sigmas"], dtype=float))
+            for s in self.record["lens_light"]["sets"]
+        )
+
+
+def read_phase(results_dir: str | Path, name: str) -> EarlierPhase:
+    """The finished phase ``name`` in ``results_dir``.
+
+    Raises
+    ------
+    PhaseInputError
+        If its ``result.json`` is missing, naming the command that makes it.
+    """
+    folder = Path(results_dir) / name
+    path = folder / RESULT_FILE
+    if not path.is_file():
+        raise PhaseInputError(
+            f"{path} not found: run phase {name!r} first "
+            f"(mgelens phase {name} --results {results_dir} ...)"
+        )
+    record = json.loads(path.read_text()).get("max_likelihood_fit")
+    if record is None:
+        raise PhaseInputError(f"{path} has no max_likelihood_fit block: rerun phase {name!r}")
+    return EarlierPhase(folder, PhaseResult.read(folder), record)
+
+
+def resolve_mask_radius(lens_dir: Path, settings: SlamSettings) -> float:
+    """Mask radius (arcsec): the settings' value, else ``mask_radius`` of ``truth.json``."""
+    if settings.mask_radius is not None:
+        return float(settings.mask_radius)
+    truth = lens_dir / "truth.json"
+    if truth.is_file():
+        radius = json.loads(truth.read_text()).get("mask_radius")
+        if radius is not None:
+            return float(radius)
+    raise PhaseInputError(
+        f"no mask radius for {lens_dir}: pass --mask-radius, set slam.mask_radius in the "
+        "config, or give the folder a truth.json with mask_radius"
+    )
+
+
+def load_dataset(
+    lens_dir: Path, settings: SlamSettings, light_centre: tuple[float, float]
+) -> tuple[FitDataset, float]:
+    """Imaging of ``lens_dir`` in the circular mask of the settings, and the mask radius.
+
+    A ``mask.fits`` in the folder is combined with the circle (a pixel is used only if
+    both use it). ``light_centre`` (arcsec) is where light profiles are over-sampled.
+    """
+    imaging = Imaging.from_folder(lens_dir)
+    radius = resolve_mask_radius(lens_dir, settings)
+    mask = mask_module.circular(imaging.shape, imaging.pixel_scale, radius, settings.mask_centre)
+    if imaging.mask is not None:
+        mask = mask | imaging.mask
+    fit_settings = FitSettings(
+        positive_only=settings.positive_only,
+        sub_size=settings.sub_size,
+        lp_sub_size=settings.lp_sub_size,
+        lp_sub_size_centre=settings.lp_sub_size_centre,
+        lp_centre_radius=settings.lp_centre_radius,
+        use_border=settings.use_border,
+    )
+    return FitDataset.from_imaging(imaging, mask, fit_settings, light_centre), radius
+
+
+def _imaging_files(lens_dir: Path) -> list[Path]:
+    return [lens_dir / f for f in IMAGING_FILES if (lens_dir / f).is_file()]
+
+
+def unmasked_pixel_centres(dataset: FitDataset) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) arcsec of the unmasked pixel centres, slim order."""
+    x, y = pixel_centres(dataset.mask.shape, dataset.imaging.pixel_scale)
+    return x[~dataset.mask], y[~dataset.mask]
+
+
+# -- one phase ---------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class PhaseProblem:
+    """Everything a phase samples: data, parameter space, model mapping, input files."""
+
+    name: str
+    dataset: FitDataset
+    space: ParameterSpace
+    model: models.PhaseModel
+    inputs: tuple[Path, ...]
+    mask_radius: float
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseLikelihood:
+    """ln L (the log evidence when the source is pixelized) of a free-parameter vector.
+
+    Samples the profiles cannot represent or the fit cannot solve return −1e99 (SPEC §8.4);
+    the sampler counts them.
+    """
+
+    dataset: FitDataset
+    space: ParameterSpace
+    model: models.PhaseModel
+
+    def __call__(self, x: np.ndarray) -> float:
+        values = self.space.values(x)
+        try:
+            lens_model = self.model.build(values)
+        except models.UnphysicalSample as error:
+            logger.debug("rejected sample: %s", error)
+            return REJECTED_LOG_LIKELIHOOD
+        value, reason = figure_of_merit(self.dataset, lens_model)
+        if reason:
+            logger.debug("rejected sample: %s", reason)
+        return value
+
+
+def sampler_for(settings: SamplerSettings) -> SamplerSettings:
+    """``settings``, with nautilus replaced by dynesty_static if it is not installed."""
+    if settings.method == "nautilus" and importlib.util.find_spec("nautilus") is None:
+        logger.warning(
+            "nautilus is not installed (pip install nautilus-sampler): using dynesty_static "
+            "with n_live = %d instead",
+            settings.n_live,
+        )
+        return dataclasses.replace(settings, method="dynesty_static")
+    return settings
+
+
+def _checkpoint_path(folder: Path, fingerprint: dict) -> Path:
+    """Checkpoint file named by the hash of ``fingerprint``; other checkpoints are removed."""
+    digest = hashlib.sha256(json.dumps(fingerprint, sort_keys=True).encode()).hexdigest()[:16]
+    stem = f"{CHECKPOINT_PREFIX}{digest}"
+    for stale in folder.glob(f"{CHECKPOINT_PREFIX}*"):
+        if not stale.name.startswith(stem):
+            logger.info("removing %s: written for other inputs or settings", stale)
+            stale.unlink()
+    return folder / f"{stem}.pickle"
+
+
+def _mass_record(profile) -> dict:
+    return {"type": type(profile).__name__, "parameters": dataclasses.asdict(profile)}
+
+
+def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dict:
+    """The ``max_likelihood_fit`` block of ``result.json``.
+
+    Lens-light sets with centre (arcsec), ell_comps, axis ratio, angle (degrees CCW from
+    +x), σ (minor-axis, arcsec) and solved intensities I₀ (data units per pixel); mass
+    profiles; source description with its hyper-parameters (and, for the SP source MGE,
+    its solved intensities); figures of merit.
+    """
+    sets, start = [], 0
+    intensities = result.lens_light_intensities
+    for spec, mge in zip(model.lens_light, result.model.lens_light, strict=True):
+        q, angle = axis_ratio_and_angle_from(mge.ell_comps)
+        sets.append(
+            {
+                "name": spec.name,
+                "centre": list(mge.centre),
+                "ell_comps": list(mge.ell_comps),
+                "axis_ratio": q,
+                "angle": angle,
+                "sigmas": spec.sigmas.tolist(),
+                "intensities": intensities[start : start + mge.n_gaussians].tolist(),
+            }
+        )
+        start += mge.n_gaussians
+    source = model.source.describe()
+    source["parameters"] = {
+        k: v for k, v in values.items() if k.split(".")[0] in ("source", "mesh", "regularization")
+    }
+    if result.n_source_light:
+        source["intensities"] = result.source_light_intensities.tolist()
+    return {
+        "log_likelihood": result.log_likelihood,
+        "log_evidence": result.log_evidence,
+        "chi_squared": result.chi_squared,
+        "n_image_pixels": int(result.dataset.data.size),
+        "positive_only": result.solution.positive_only,
+        "n_active_zero": int(result.solution.active_zero.sum()),
+        "lens_light": {"kind": "mge", "sets": sets},
+        "mass": [_mass_record(p) for p in result.model.mass],
+        "source": source,
+    }
+
+
+def _write_outputs(
+    folder: Path, phase: PhaseResult, best: FitResult, record: dict, lens: str
+) -> None:
+    provenance = {"PHASE": phase.phase, "LENS": lens[:68], "PROFILE": phase.settings["profile"]}
+    products.write_model_fits(folder / "model.fits", best, provenance)
+    if phase.phase == "spix1":
+        products.write_adapt_image(folder / ADAPT_IMAGE_FILE, best)
+    with atomic_path(folder / SAMPLES_FILE) as temporary:
+        phase.samples_table().to_csv(temporary, index=False, float_format="%.17g")
+    write_json(folder / RESULT_FILE, {**phase.summary(), "max_likelihood_fit": record})
+
+
+def _solve(
+    problem: PhaseProblem, folder: Path, settings: SlamSettings, seed: int, lens_dir: Path
+) -> PhaseResult:
+    checksums = input_checksums(problem.inputs)
+    sampler = sampler_for(settings.samplers[problem.name])
+    fingerprint = {
+        "phase": problem.name,
+        "space": problem.space.to_dict(),
+        "sampler": sampler.result_settings(),
+        "seed": seed,
+        "fit": dataclasses.asdict(problem.dataset.settings),
+        "inputs": checksums,
+    }
+    checkpoint = _checkpoint_path(folder, fingerprint)
+    logger.info(
+        "phase %s of %s: %d free parameters, %s with n_live = %d, %d image pixels",
+        problem.name,
+        lens_dir,
+        problem.space.n_free,
+        sampler.method,
+        sampler.n_live,
+        problem.dataset.data.size,
+    )
+    likelihood = PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    output = run_nested(likelihood, problem.space, sampler, checkpoint, seed, logger.info)
+    phase = PhaseResult(
+        phase=problem.name,
+        space=problem.space,
+        output=output,
+        settings={
+            "profile": settings.profile,
+            "lens_dir": str(lens_dir),
+            "mask_radius": problem.mask_radius,
+            "model": problem.model.describe(),
+            "slam": settings.to_dict(),
+            "fit": dataclasses.asdict(problem.dataset.settings),
+        },
+        input_checksums=checksums,
+    )
+    values = problem.space.values(output.max_likelihood())
+    best = fit(problem.dataset, problem.model.build(values))
+    _write_outputs(folder, phase, best, fit_record(best, problem.model, values), lens_dir.name)
+    for stale in folder.glob(f"{CHECKPOINT_PREFIX}*"):
+        stale.unlink()
+    logger.info(
+        "phase %s done: ln Z = %.3f, max ln L = %.3f, %d calls (%d rejected), %.1f s",
+        problem.name,
+        output.log_evidence,
+        best.log_evidence,
+        output.n_calls,
+        output.n_rejected,
+        output.runtime,
+    )
+    return phase
+
+
+# -- the five problems -------------------------------------------------------------------
+def sp_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+    """SP: 2×30 MGE lens light, SIE + shear, 1×20 MGE source (17 parameters)."""
+    del results_dir  # the first phase reads no earlier result
+    dataset, radius = load_dataset(lens_dir, settings, settings.mask_centre)
+    specs = models.mge_specs(2, False, dataset.imaging.pixel_scale, radius)
+    return PhaseProblem(
+        "sp",
+        dataset,
+        models.sp_space(specs, settings.mask_centre),
+        models.PhaseModel(specs, models.MGESourceModel()),
+        tuple(_imaging_files(lens_dir)),
+        radius,
+    )
+
+
+def spix1_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+    """SPix1: lens light fixed (SP), SIE + shear passed from SP, overlay mesh (8)."""
+    sp = read_phase(results_dir, "sp")
+    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
+    x, y = overlay_centres(dataset.mask, dataset.imaging.pixel_scale, settings.overlay_shape)
+    source = models.MeshSourceModel(
+        x, y, settings.spix1_regularization, settings.interpolation, settings.cross_offset
+    )
+    return PhaseProblem(
+        "spix1",
+        dataset,
+        models.spix1_space(sp.result, settings.prior_passing),
+        models.PhaseModel(sp.lens_light_specs, source),
+        (*_imaging_files(lens_dir), *sp.files),
+        radius,
+    )
+
+
+def _kmeans_source(
+    dataset: FitDataset, results_dir: Path, settings: SlamSettings
+) -> tuple[models.KMeansSourceModel, Path]:
+    path = Path(results_dir) / "spix1" / ADAPT_IMAGE_FILE
+    if not path.is_file():
+        raise PhaseInputError(f"{path} not found: rerun phase 'spix1'")
+    adapt = products.read_adapt_image(path, dataset.mask)
+    x, y = unmasked_pixel_centres(dataset)
+    source = models.KMeansSourceModel(
+        x,
+        y,
+        adapt,
+        settings.source_pixels,
+        settings.kmeans_seed,
+        settings.kmeans_scheme,
+        settings.interpolation,
+        settings.cross_offset,
+    )
+    return source, path
+
+
+def spix2_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+    """SPix2: lens light (SP) and mass (SPix1) fixed, k-means mesh + AdaptiveBrightnessSplit
+    hyper-parameters free (5)."""
+    sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
+    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
+    source, adapt_path = _kmeans_source(dataset, results_dir, settings)
+    return PhaseProblem(
+        "spix2",
+        dataset,
+        models.spix2_space(sp.result, spix1.result),
+        models.PhaseModel(sp.lens_light_specs, source),
+        (*_imaging_files(lens_dir), *sp.files, *spix1.files, adapt_path),
+        radius,
+    )
+
+
+def light_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+    """LIGHT: MGE refit (N×30 + point set), mass (SPix1) and source (SPix2) fixed."""
+    sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
+    spix2 = read_phase(results_dir, "spix2")
+    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
+    kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
+    source = kmeans.fixed(spix2.result.max_likelihood)
+    specs = models.mge_specs(
+        settings.mge_sets, settings.point_set, dataset.imaging.pixel_scale, radius
+    )
+    return PhaseProblem(
+        "light",
+        dataset,
+        models.light_space(specs, sp.result, spix1.result, spix2.result),
+        models.PhaseModel(specs, source),
+        (*_imaging_files(lens_dir), *sp.files, *spix1.files, *spix2.files, adapt_path),
+        radius,
+    )
+
+
+def mass_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+    """MASS: lens light (LIGHT) and source (SPix2) fixed, EPL + shear (8)."""
+    spix1, spix2 = read_phase(results_dir, "spix1"), read_phase(results_dir, "spix2")
+    light = read_phase(results_dir, "light")
+    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(light.result))
+    kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
+    source = kmeans.fixed(spix2.result.max_likelihood)
+    return PhaseProblem(
+        "mass",
+        dataset,
+        models.mass_space(light.result, spix1.result, spix2.result, settings.prior_passing),
+        models.PhaseModel(light.lens_light_specs, source),
+        (*_imaging_files(lens_dir), *spix1.files, *spix2.files, *light.files, adapt_path),
+        radius,
+    )
+
+
+PROBLEMS = {
+    "sp": sp_problem,
+    "spix1": spix1_problem,
+    "spix2": spix2_problem,
+    "light": light_problem,
+    "mass": mass_problem,
+}
+
+
+def run_phase(
+    name: str,
+    lens_dir: str | Path,
+    results_dir: str | Path,
+    settings: SlamSettings,
+    seed: int = 0,
+    threads: int | None = None,
+) -> PhaseResult:
+    """Run phase ``name`` of the lens in ``lens_dir``; write ``results_dir/<name>/``.
+
+    Parameters
+    ----------
+    name : {"sp", "spix1", "spix2", "light", "mass"}
+    lens_dir : path
+        Folder with ``data.fits``, ``noise_map.fits``, ``psf.fits`` (and optionally
+        ``mask.fits``, ``truth.json``).
+    results_dir : path
+        The lens's results folder holding one sub-folder per phase.
+    settings : SlamSettings
+    seed : int
+        Seed of the sampler.
+    threads : int, optional
+        numba / BLAS threads (:func:`limit_threads`); ``None`` leaves them as they are.
+
+    Returns
+    -------
+    PhaseResult
+    """
+    if name not in PROBLEMS:
+        raise ValueError(f"unknown phase {name!r}; phases are {list(PHASES)}")
+    if threads is not None:
+        limit_threads(threads)
+    lens_dir, results_dir = Path(lens_dir), Path(results_dir)
+    folder = results_dir / name
+    folder.mkdir(parents=True, exist_ok=True)
+    with _phase_log(folder):
+        problem = PROBLEMS[name](lens_dir, results_dir, settings)
+        return _solve(problem, folder, settings, seed, lens_dir)
+
+
+# -- reading results back ----------------------------------------------------------------
+def _record(result_folder: str | Path) -> dict:
+    path = Path(result_folder) / RESULT_FILE
+    if not path.is_file():
+        raise PhaseInputError(f"{path} not found: run the phase first")
+    record = json.loads(path.read_text()).get("max_likelihood_fit")
+    if record is None:
+        raise PhaseInputError(f"{path} has no max_likelihood_fit block")
+    return record
+
+
+def lens_light_model(
+    result_folder: str | Path,
+) -> tuple[tuple[MGESet, ...], tuple[np.ndarray, ...]]:
+    """The maximum-likelihood MGE lens light of a phase folder, from its ``result.json``.
+
+    Returns
+    -------
+    sets : tuple of MGESet
+        Centre (arcsec), ell_comps and minor-axis σ (arcsec) of every set.
+    intensities : tuple of ndarray
+        Solved central intensities I₀ (data units per pixel) of each set's Gaussians;
+        the light is Σ_sets ``set.image(x, y, intensities)`` before the PSF.
+    """
+    sets = _record(result_folder)["lens_light"]["sets"]
+    mges = tuple(MGESet(tuple(s["centre"]), tuple(s["ell_comps"]), s["sigmas"]) for s in sets)
+    return mges, tuple(np.asarray(s["intensities"], dtype=float) for s in sets)
+
+
+def mass_model(result_folder: str | Path) -> tuple:
+    """The maximum-likelihood mass profiles (SIE or EPL, ExternalShear) of a phase folder."""
+    profiles = []
+    for entry in _record(result_folder)["mass"]:
+        parameters = dict(entry["parameters"])
+        if "centre" in parameters:
+            parameters["centre"] = tuple(parameters["centre"])
+        profiles.append(MASS_TYPES[entry["type"]](**parameters))
+    return tuple(profiles)

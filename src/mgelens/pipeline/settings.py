@@ -1,0 +1,264 @@
+"""Settings of the SLaM chain: speed profiles and the ``slam:`` section of a YAML file.
+
+Two profiles give the defaults (:data:`PROFILES`):
+
+* ``paper``: the paper's settings (SPEC §8.1, §8.3): live points 200 / 150 / 100 / 150 /
+  150, nautilus where the paper used it, 1500 k-means source pixels, a 34×34 overlay.
+* ``quick`` (default): dynesty random walks with few live points and a looser stopping
+  criterion in every phase, 500 k-means source pixels, a 24×24 overlay and light profiles
+  over-sampled 2×2 (8×8 within 0.3″ of the centre), for the embedded default sample
+  (M1–M3) on two cores. The MGE itself is not simplified (30 Gaussians per set,
+  SPEC §2.4).
+
+A YAML file may override any field under a top-level ``slam:`` key; other top-level keys
+(the workflow's own configuration) are ignored. Per-phase sampler settings go under
+``slam: samplers: <phase>:`` and are merged into the profile's. Unknown keys raise
+:class:`SettingsError` naming the key. Example::
+
+    slam:
+      positive_only: false        # pn-MGE
+      mge_sets: 6
+      samplers:
+        mass: {n_live: 80}
+"""
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+
+import yaml
+
+from mgelens.search.sampler import SamplerSettings
+
+PHASES = ("sp", "spix1", "spix2", "light", "mass")
+"""Phase names in chain order; each is also the name of the phase's result folder."""
+
+N_GAUSSIANS = 30
+"""Gaussians per extended MGE set (paper; not a setting)."""
+
+MGE_SET_CHOICES = (2, 4, 6)
+SPIX1_REGULARIZATIONS = ("constant", "constant_split")
+KMEANS_SCHEMES = ("2023", "2024")
+CROSS_OFFSETS = ("anchor", "paper")
+INTERPOLATIONS = ("natural_neighbour", "nearest")
+PRIOR_PASSING_RULES = ("paper", "2024")
+
+
+class SettingsError(ValueError):
+    """Invalid settings: the message names the file, the key and the accepted values."""
+
+
+@dataclass(frozen=True)
+class SlamSettings:
+    """Every choice of the SLaM chain (SPEC §1.3, §4–8).
+
+    Attributes
+    ----------
+    profile : {"quick", "paper"}
+        Speed profile the defaults came from (recorded in results).
+    mask_radius : float or None
+        Radius of the circular fit mask in arcsec; ``None`` takes ``mask_radius`` from the
+        lens folder's ``truth.json`` (mocks). The MGE σ grid runs from Δ/5 to this radius.
+    mask_centre : (float, float)
+        Mask centre (x, y) in arcsec; also the centre of the SP lens-light and mass priors.
+    positive_only : bool
+        Non-negative solve of all linear unknowns ("nn-MGE", default) or unconstrained
+        ("pn-MGE"), in every phase.
+    mge_sets : {2, 4, 6}
+        Extended 30-Gaussian sets of the LIGHT phase (SP always uses 2).
+    point_set : bool
+        Add the 10-Gaussian point set (own centre and ell_comps) in the LIGHT phase.
+    source_pixels : int
+        k-means source pixels of SPix2, LIGHT and MASS (paper 1500).
+    overlay_shape : (int, int)
+        (n_y, n_x) of the SPix1 overlay grid (paper 34×34).
+    spix1_regularization : {"constant", "constant_split"}
+        SPix1 regularization: neighbour gradient (paper) or cross ("split") constant.
+    kmeans_scheme : {"2023", "2024"}
+        k-means weight formula (SPEC §4.1; 2023 = paper era).
+    kmeans_seed : int
+        Fixed seed of the k-means mesh (SPEC §4.1).
+    interpolation : {"natural_neighbour", "nearest"}
+        Source-plane interpolation.
+    cross_offset : {"anchor", "paper"}
+        Cross-point offset of the split regularization (½√A or √(A/2), SPEC §5.3).
+    prior_passing : {"paper", "2024"}
+        Prior-passing rule (SPEC §8.2).
+    sub_size, lp_sub_size, lp_sub_size_centre, lp_centre_radius, use_border
+        Fit settings (:class:`mgelens.fit.FitSettings`).
+    samplers : mapping of phase name to SamplerSettings
+        The non-linear search of each phase. ``method="nautilus"`` falls back to
+        ``dynesty_static`` with the same live points if nautilus is not installed.
+    """
+
+    profile: str = "quick"
+    mask_radius: float | None = None
+    mask_centre: tuple[float, float] = (0.0, 0.0)
+    positive_only: bool = True
+    mge_sets: int = 4
+    point_set: bool = True
+    source_pixels: int = 1500
+    overlay_shape: tuple[int, int] = (34, 34)
+    spix1_regularization: str = "constant"
+    kmeans_scheme: str = "2023"
+    kmeans_seed: int = 0
+    interpolation: str = "natural_neighbour"
+    cross_offset: str = "anchor"
+    prior_passing: str = "paper"
+    sub_size: int = 4
+    lp_sub_size: int = 4
+    lp_sub_size_centre: int = 16
+    lp_centre_radius: float = 0.3
+    use_border: bool = True
+    samplers: Mapping[str, SamplerSettings] = field(default_factory=dict)
+
+    def __post_init__(self):
+        _check_choice("mge_sets", self.mge_sets, MGE_SET_CHOICES)
+        _check_choice("spix1_regularization", self.spix1_regularization, SPIX1_REGULARIZATIONS)
+        _check_choice("kmeans_scheme", str(self.kmeans_scheme), KMEANS_SCHEMES)
+        _check_choice("interpolation", self.interpolation, INTERPOLATIONS)
+        _check_choice("cross_offset", self.cross_offset, CROSS_OFFSETS)
+        _check_choice("prior_passing", self.prior_passing, PRIOR_PASSING_RULES)
+        if self.mask_radius is not None and not self.mask_radius > 0:
+            raise SettingsError(f"mask_radius must be > 0 arcsec, got {self.mask_radius}")
+        if self.source_pixels < 3:
+            raise SettingsError(f"source_pixels must be at least 3, got {self.source_pixels}")
+        if len(self.overlay_shape) != 2 or min(self.overlay_shape) < 2:
+            raise SettingsError(f"overlay_shape must be two integers >= 2: {self.overlay_shape}")
+        missing = [p for p in PHASES if p not in self.samplers]
+        if missing:
+            raise SettingsError(f"sampler settings missing for phases {missing}")
+        object.__setattr__(self, "kmeans_scheme", str(self.kmeans_scheme))
+        object.__setattr__(self, "mask_centre", tuple(float(v) for v in self.mask_centre))
+        object.__setattr__(self, "overlay_shape", tuple(int(v) for v in self.overlay_shape))
+        object.__setattr__(self, "samplers", MappingProxyType(dict(self.samplers)))
+
+    def with_overrides(self, **changes) -> "SlamSettings":
+        """A copy with the given fields replaced (``None`` values are ignored)."""
+        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+    def to_dict(self) -> dict:
+        """JSON-ready form (recorded in every result file)."""
+        content = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        content["mask_centre"] = list(self.mask_centre)
+        content["overlay_shape"] = list(self.overlay_shape)
+        content["samplers"] = {name: s.to_dict() for name, s in self.samplers.items()}
+        return content
+
+
+def _check_choice(name: str, value, choices) -> None:
+    if value not in choices:
+        raise SettingsError(f"{name} must be one of {list(choices)}, got {value!r}")
+
+
+_PAPER_SAMPLERS = {
+    "sp": SamplerSettings(method="dynesty_static", n_live=200),
+    "spix1": SamplerSettings(method="nautilus", n_live=150),
+    "spix2": SamplerSettings(method="dynesty_static", n_live=100),
+    "light": SamplerSettings(method="nautilus", n_live=150),
+    "mass": SamplerSettings(method="nautilus", n_live=150),
+}
+
+_QUICK = {"method": "dynesty_static", "sample": "rwalk", "walks": 3, "dlogz": 1.0}
+_QUICK_SAMPLERS = {
+    "sp": SamplerSettings(n_live=36, **_QUICK),
+    "spix1": SamplerSettings(n_live=18, **_QUICK),
+    "spix2": SamplerSettings(n_live=12, **_QUICK),
+    "light": SamplerSettings(n_live=30, **_QUICK),
+    "mass": SamplerSettings(n_live=24, **{**_QUICK, "walks": 5}),
+}
+"""Quick-profile samplers: dynesty random walks with 2 n_dim + 2 live points (dynesty's
+minimum is more than 2 n_dim), a short walk and a loose stopping criterion; the MASS phase,
+whose posterior is the pipeline's product, gets more live points and longer walks."""
+
+PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
+    {
+        "paper": SlamSettings(profile="paper", samplers=_PAPER_SAMPLERS),
+        "quick": SlamSettings(
+            profile="quick",
+            source_pixels=500,
+            overlay_shape=(24, 24),
+            lp_sub_size=2,
+            lp_sub_size_centre=8,
+            samplers=_QUICK_SAMPLERS,
+        ),
+    }
+)
+"""Default settings of each speed profile."""
+
+DEFAULT_PROFILE = "quick"
+
+
+def profile_settings(profile: str = DEFAULT_PROFILE) -> SlamSettings:
+    """Default settings of ``profile`` ("quick" or "paper")."""
+    if profile not in PROFILES:
+        raise SettingsError(f"unknown profile {profile!r}; choose one of {sorted(PROFILES)}")
+    return PROFILES[profile]
+
+
+def settings_from_mapping(
+    content: Mapping, profile: str | None = None, origin: str = "settings"
+) -> SlamSettings:
+    """Settings from a ``slam:`` mapping applied on top of a profile's defaults.
+
+    Parameters
+    ----------
+    content : mapping
+        Field values of :class:`SlamSettings` (``samplers`` maps phase names to partial
+        :class:`~mgelens.search.sampler.SamplerSettings` dictionaries). It may name the
+        profile under ``profile``.
+    profile : str, optional
+        Profile whose defaults are used; wins over ``content["profile"]``.
+    origin : str
+        Where ``content`` came from, for error messages.
+
+    Raises
+    ------
+    SettingsError
+        For an unknown key (named with its ``slam.`` path) or an invalid value.
+    """
+    content = dict(content)
+    profile = profile or content.pop("profile", None) or DEFAULT_PROFILE
+    content.pop("profile", None)
+    base = profile_settings(profile)
+    known = {f.name for f in dataclasses.fields(SlamSettings)} - {"profile"}
+    unknown = sorted(set(content) - known)
+    if unknown:
+        raise SettingsError(f"{origin}: unknown key slam.{unknown[0]}; known keys: {sorted(known)}")
+    samplers = dict(base.samplers)
+    for phase, overrides in (content.pop("samplers", None) or {}).items():
+        if phase not in PHASES:
+            raise SettingsError(
+                f"{origin}: unknown key slam.samplers.{phase}; phases are {list(PHASES)}"
+            )
+        merged = {**samplers[phase].to_dict(), **(overrides or {})}
+        try:
+            samplers[phase] = SamplerSettings.from_dict(merged)
+        except (TypeError, ValueError) as error:
+            raise SettingsError(f"{origin}: slam.samplers.{phase}: {error}") from error
+    try:
+        return dataclasses.replace(base, samplers=samplers, **content)
+    except (TypeError, ValueError) as error:
+        raise SettingsError(f"{origin}: {error}") from error
+
+
+def load_settings(path: str | Path | None = None, profile: str | None = None) -> SlamSettings:
+    """Settings of ``profile`` overridden by the ``slam:`` section of the YAML file ``path``.
+
+    Without a file (or without a ``slam:`` section) the profile's defaults are returned.
+    """
+    if path is None:
+        return profile_settings(profile or DEFAULT_PROFILE)
+    path = Path(path)
+    try:
+        document = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as error:
+        raise SettingsError(f"{path}: cannot read the settings file: {error}") from error
+    if not isinstance(document, Mapping):
+        raise SettingsError(f"{path}: expected a YAML mapping at the top level")
+    section = document.get("slam") or {}
+    if not isinstance(section, Mapping):
+        raise SettingsError(f"{path}: `slam:` must be a mapping of settings")
+    return settings_from_mapping(section, profile, origin=str(path))

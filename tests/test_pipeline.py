@@ -1,0 +1,455 @@
+"""SLaM pipeline: parameter spaces, values → profiles, prior passing, settings, products,
+a tiny end-to-end SP phase and checkpoint resume (SPEC §8)."""
+
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from astropy.io import fits
+
+from mgelens import simulate
+from mgelens.fit import MGESource, fit
+from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
+from mgelens.imaging import Imaging
+from mgelens.mass import EPL, SIE, ExternalShear
+from mgelens.pipeline import models, phases, products
+from mgelens.pipeline.settings import (
+    PHASES,
+    SettingsError,
+    load_settings,
+    profile_settings,
+    settings_from_mapping,
+)
+from mgelens.search.priors import TruncatedGaussian, Uniform
+from mgelens.search.results import PhaseResult
+from mgelens.search.sampler import SamplerOutput
+from mgelens.source.image_mesh import overlay_centres
+
+PIXEL = 0.1
+MASK_RADIUS = 1.4
+SP_SPECS = models.mge_specs(2, False, PIXEL, MASK_RADIUS)
+
+SP_VALUES = {
+    "lens_light.set_0.centre_x": 0.01,
+    "lens_light.set_0.centre_y": -0.07,
+    "lens_light.set_0.ell_comps_1": 0.05,
+    "lens_light.set_0.ell_comps_2": -0.1,
+    "lens_light.set_1.ell_comps_1": 0.2,
+    "lens_light.set_1.ell_comps_2": 0.1,
+    "mass.centre_x": 0.013,
+    "mass.centre_y": -0.07,
+    "mass.ell_comps_1": 0.0,
+    "mass.ell_comps_2": 0.11,
+    "mass.einstein_radius": 1.2,
+    "shear.gamma_1": 0.01,
+    "shear.gamma_2": -0.02,
+    "source.set_0.centre_x": 0.05,
+    "source.set_0.centre_y": 0.02,
+    "source.set_0.ell_comps_1": 0.1,
+    "source.set_0.ell_comps_2": 0.0,
+}
+SP_FULL_VALUES = models.sp_space(SP_SPECS).values(models.sp_space(SP_SPECS).vector(SP_VALUES))
+"""SP_VALUES with the tied centres of ``set_1`` filled in."""
+SPIX2_VALUES = {
+    "mesh.weight_floor": 0.3,
+    "mesh.weight_power": 2.0,
+    "regularization.inner_coefficient": 1.0,
+    "regularization.outer_coefficient": 2.0,
+    "regularization.signal_scale": 0.5,
+}
+
+
+def fake_result(phase, space, centre, scale=0.01, n=400, seed=0) -> PhaseResult:
+    """A result whose samples are N(centre, scale²) in every free parameter, equal weights."""
+    rng = np.random.default_rng(seed)
+    mean = np.array([centre[name] for name in space.free_names])
+    samples = mean + scale * rng.standard_normal((n, mean.size))
+    output = SamplerOutput(
+        names=space.free_names,
+        samples=samples,
+        log_weights=np.full(n, -np.log(n)),
+        log_likelihoods=-0.5 * np.sum(((samples - mean) / scale) ** 2, axis=1),
+        log_evidence=0.0,
+        log_evidence_error=0.1,
+        n_calls=n,
+        n_rejected=0,
+        runtime=1.0,
+        n_resumes=0,
+        method="dynesty_static",
+        settings={},
+        seed=seed,
+    )
+    return PhaseResult(phase, space, output)
+
+
+@pytest.fixture(scope="module")
+def chain():
+    """Fake SP, SPix1, SPix2 and LIGHT results (4 sets + point set)."""
+    sp = fake_result("sp", models.sp_space(SP_SPECS), SP_VALUES)
+    spix1_space = models.spix1_space(sp)
+    spix1 = fake_result(
+        "spix1", spix1_space, {**SP_VALUES, "regularization.coefficient": 3.0}, scale=0.005
+    )
+    spix2 = fake_result("spix2", models.spix2_space(sp, spix1), SPIX2_VALUES)
+    specs = models.mge_specs(4, True, PIXEL, MASK_RADIUS)
+    light_space = models.light_space(specs, sp, spix1, spix2)
+    light_values = {n: 0.05 for n in light_space.free_names}
+    light = fake_result("light", light_space, light_values)
+    return {"sp": sp, "spix1": spix1, "spix2": spix2, "light": light}
+
+
+# -- parameter spaces -------------------------------------------------------------------
+def test_sp_space_has_17_parameters_and_one_shared_lens_light_centre():
+    space = models.sp_space(SP_SPECS)
+    assert space.n_free == 17
+    assert space.parameter("lens_light.set_1.centre_x").tied_to == "lens_light.set_0.centre_x"
+    assert space.parameter("lens_light.set_1.centre_y").tied_to == "lens_light.set_0.centre_y"
+    values = space.values(space.vector(SP_VALUES))
+    first, second = models.lens_light_sets(values, SP_SPECS)
+    assert first.centre == second.centre == (0.01, -0.07)
+    assert first.ell_comps == (0.05, -0.1)
+    assert second.ell_comps == (0.2, 0.1)
+    assert first.n_gaussians == second.n_gaussians == 30
+    assert first.sigmas[0] == pytest.approx(PIXEL / 5)
+    assert first.sigmas[-1] == pytest.approx(MASK_RADIUS)
+
+
+def test_phase_spaces_have_the_papers_free_parameter_counts(chain):
+    assert models.spix1_space(chain["sp"]).n_free == 8
+    assert models.spix2_space(chain["sp"], chain["spix1"]).n_free == 5
+    assert models.mass_space(chain["light"], chain["spix1"], chain["spix2"]).n_free == 8
+
+
+@pytest.mark.parametrize(
+    ("n_sets", "point_set", "expected"),
+    [(2, False, 6), (2, True, 10), (4, True, 14), (6, True, 18)],
+)
+def test_light_space_counts(chain, n_sets, point_set, expected):
+    specs = models.mge_specs(n_sets, point_set, PIXEL, MASK_RADIUS)
+    space = models.light_space(specs, chain["sp"], chain["spix1"], chain["spix2"])
+    assert space.n_free == expected
+    if point_set:
+        assert specs[-1].name == "point"
+        assert specs[-1].sigmas.size == 10
+        assert space.parameter("lens_light.point.centre_x").prior is not None
+
+
+def test_light_space_priors_follow_spec_notes(chain):
+    specs = models.mge_specs(4, True, PIXEL, MASK_RADIUS)
+    space = models.light_space(specs, chain["sp"], chain["spix1"], chain["spix2"])
+    cx = chain["sp"].max_likelihood["lens_light.set_0.centre_x"]
+    assert space.parameter("lens_light.set_0.centre_x").prior == Uniform(cx - 0.1, cx + 0.1)
+    assert space.parameter("lens_light.point.centre_x").prior == Uniform(cx - 0.1, cx + 0.1)
+    assert space.parameter("lens_light.set_3.ell_comps_2").prior == Uniform(-0.7, 0.7)
+    assert space.parameter("lens_light.point.ell_comps_1").prior == TruncatedGaussian(
+        0.0, 0.3, -1.0, 1.0
+    )
+    assert space.parameter("lens_light.set_2.centre_y").tied_to == "lens_light.set_0.centre_y"
+
+
+def test_fixed_components_take_the_earlier_maximum_likelihood(chain):
+    spix2 = models.spix2_space(chain["sp"], chain["spix1"])
+    best = chain["spix1"].max_likelihood
+    for name in ("mass.einstein_radius", "mass.ell_comps_2", "shear.gamma_1"):
+        assert spix2.parameter(name).value == best[name]
+    assert spix2.parameter("lens_light.set_1.centre_x").tied_to == "lens_light.set_0.centre_x"
+    mass = models.mass_space(chain["light"], chain["spix1"], chain["spix2"])
+    light_best = chain["light"].max_likelihood
+    assert (
+        mass.parameter("lens_light.point.ell_comps_1").value
+        == light_best["lens_light.point.ell_comps_1"]
+    )
+    assert (
+        mass.parameter("regularization.signal_scale").value
+        == chain["spix2"].max_likelihood["regularization.signal_scale"]
+    )
+
+
+# -- prior passing ----------------------------------------------------------------------
+def test_spix1_priors_are_passed_from_sp(chain):
+    sp = chain["sp"]
+    space = models.spix1_space(sp)
+    median, interval = sp.median, sp.interval(3)
+    widths = {"mass.centre_x": 0.05, "mass.einstein_radius": 0.25 * median["mass.einstein_radius"]}
+    for name, width in widths.items():
+        prior = space.parameter(name).prior
+        half = max(interval[name][1] - median[name], median[name] - interval[name][0])
+        assert isinstance(prior, TruncatedGaussian)
+        assert prior.mean == pytest.approx(median[name])
+        assert prior.sigma == pytest.approx(max(half, width))
+    assert space.parameter("regularization.coefficient").prior.lower == 1e-6
+
+
+def test_mass_phase_passes_sie_parameters_from_spix1_and_frees_the_slope(chain):
+    space = models.mass_space(chain["light"], chain["spix1"], chain["spix2"])
+    spix1 = chain["spix1"]
+    prior = space.parameter("mass.ell_comps_2").prior
+    assert prior.mean == pytest.approx(spix1.median["mass.ell_comps_2"])
+    assert prior.sigma == pytest.approx(0.2)  # width modifier beats a narrow posterior
+    assert (prior.lower, prior.upper) == (-1.0, 1.0)
+    assert space.parameter("mass.slope").prior == Uniform(1.5, 3.0)
+    assert space.parameter("shear.gamma_2").prior.mean == pytest.approx(
+        spix1.median["shear.gamma_2"]
+    )
+
+
+# -- values → profiles ------------------------------------------------------------------
+def test_mass_profiles_map_sie_epl_and_shear():
+    sie, shear = models.mass_profiles(SP_VALUES)
+    assert isinstance(sie, SIE)
+    assert isinstance(shear, ExternalShear)
+    assert (shear.gamma_1, shear.gamma_2) == (0.01, -0.02)
+    q, angle = axis_ratio_and_angle_from((0.0, 0.11))
+    assert sie.centre == (0.013, -0.07)
+    assert (sie.axis_ratio, sie.angle) == pytest.approx((q, angle))
+    assert sie.angle == pytest.approx(45.0)
+    epl, _ = models.mass_profiles({**SP_VALUES, "mass.slope": 2.1})
+    assert isinstance(epl, EPL)
+    assert epl.slope == 2.1
+    assert epl.einstein_radius == 1.2
+    with pytest.raises(models.UnphysicalSample, match="slope"):
+        models.mass_profiles({**SP_VALUES, "mass.slope": 2.9})
+
+
+def test_phase_model_builds_the_lens_model():
+    model = models.PhaseModel(SP_SPECS, models.MGESourceModel())
+    lens = model.build(SP_FULL_VALUES)
+    assert isinstance(lens.source, MGESource)
+    (source,) = lens.source.sets
+    assert source.centre == (0.05, 0.02)
+    assert source.sigmas[[0, -1]] == pytest.approx([0.01, 1.0])
+    assert len(lens.lens_light) == 2
+    assert isinstance(lens.mass[0], SIE)
+
+
+def test_regularization_from_values():
+    values = {"regularization.coefficient": 2.0, **SPIX2_VALUES}
+    assert models.regularization_from(values, "constant").coefficient == 2.0
+    assert models.regularization_from(values, "constant_split").coefficient == 2.0
+    adaptive = models.regularization_from(values, "adaptive_split")
+    assert (adaptive.inner_coefficient, adaptive.outer_coefficient) == (1.0, 2.0)
+    assert adaptive.signal_scale == 0.5
+
+
+# -- settings ---------------------------------------------------------------------------
+def test_profiles_paper_and_quick():
+    paper = profile_settings("paper")
+    assert [paper.samplers[p].n_live for p in PHASES] == [200, 150, 100, 150, 150]
+    assert [paper.samplers[p].method for p in ("sp", "spix2")] == ["dynesty_static"] * 2
+    assert paper.source_pixels == 1500
+    assert paper.overlay_shape == (34, 34)
+    quick = profile_settings("quick")
+    assert all(quick.samplers[p].n_live <= 60 for p in PHASES)
+    assert 500 <= quick.source_pixels <= 800
+    assert quick.positive_only
+
+
+def test_settings_from_yaml_override_the_profile(tmp_path):
+    path = tmp_path / "config.yaml"
+    path.write_text(
+        "samples: config/lenses.tsv\n"
+        "slam:\n"
+        "  profile: paper\n"
+        "  positive_only: false\n"
+        "  mge_sets: 6\n"
+        "  overlay_shape: [30, 30]\n"
+        "  samplers:\n"
+        "    mass: {n_live: 77}\n"
+    )
+    settings = load_settings(path)
+    assert settings.profile == "paper"
+    assert not settings.positive_only
+    assert settings.mge_sets == 6
+    assert settings.overlay_shape == (30, 30)
+    assert settings.samplers["mass"].n_live == 77
+    assert settings.samplers["mass"].method == "nautilus"
+    assert settings.samplers["sp"].n_live == 200
+    assert load_settings(path, profile="quick").samplers["sp"].n_live < 200
+    assert load_settings(None, "paper") == profile_settings("paper")
+
+
+@pytest.mark.parametrize(
+    ("section", "message"),
+    [
+        ({"n_gausians": 20}, "slam.n_gausians"),
+        ({"samplers": {"sp": {"nlive": 3}}}, "slam.samplers.sp.*nlive"),
+        ({"samplers": {"source": {}}}, "slam.samplers.source"),
+        ({"mge_sets": 3}, "mge_sets"),
+        ({"profile": "fast"}, "fast"),
+    ],
+)
+def test_invalid_settings_name_the_key(section, message):
+    with pytest.raises(SettingsError, match=message):
+        settings_from_mapping(section)
+
+
+# -- small mock and products ------------------------------------------------------------
+@pytest.fixture(scope="module")
+def mock_dir(tmp_path_factory):
+    """A 31×31 M1-like mock at 0.1″ with the noise raised 100× (a broad, fast posterior)."""
+    observation = simulate.Observation(
+        image_size=31,
+        pixel_scale=PIXEL,
+        sub_size=4,
+        psf_sigma=0.1,
+        psf_size=5,
+        source_plane_size=41,
+        source_plane_pixel_scale=0.05,
+    )
+    mock = simulate.simulate(simulate.paper_mock("M1"), observation)
+    imaging = mock.imaging
+    rng = np.random.default_rng(5)
+    noise = 100.0 * imaging.noise_map
+    data = mock.model + noise * rng.standard_normal(noise.shape)
+    folder = tmp_path_factory.mktemp("mock")
+    Imaging(data, noise, imaging.psf, PIXEL, unit=imaging.unit).to_fits(folder)
+    return folder
+
+
+def tiny_settings(**sampler):
+    sp = {"n_live": 36, "dlogz": 0.5, "progress_every": 1e9, **sampler}
+    return settings_from_mapping(
+        {"mask_radius": MASK_RADIUS, "lp_sub_size_centre": 4, "samplers": {"sp": sp}}
+    )
+
+
+def test_model_fits_extensions_and_units(mock_dir, tmp_path):
+    settings = tiny_settings()
+    problem = phases.sp_problem(mock_dir, tmp_path, settings)
+    values = problem.space.values(problem.space.vector(SP_VALUES))
+    result = fit(problem.dataset, problem.model.build(values))
+    path = tmp_path / "model.fits"
+    products.write_model_fits(path, result, {"PHASE": "sp"})
+    mask = problem.dataset.mask
+    with fits.open(path) as hdus:
+        names = [h.name for h in hdus[1:]]
+        assert names == list(products.MODEL_EXTENSIONS)
+        assert hdus[0].header["PHASE"] == "sp"
+        assert hdus[0].header["SOLVER"] == "nnls"
+        for hdu in hdus[1:6]:
+            assert hdu.data.shape == mask.shape
+            assert np.all(hdu.data[mask] == 0.0)
+            assert hdu.header["BUNIT"] == ("" if hdu.name == "NRESID" else "electron/s")
+        data = problem.dataset.imaging.data
+        np.testing.assert_allclose(hdus["RESID"].data[~mask], data[~mask] - result.model_image)
+        np.testing.assert_allclose(
+            hdus["NRESID"].data[~mask], result.residuals / problem.dataset.noise_map
+        )
+        np.testing.assert_allclose(
+            hdus["MODEL"].data, hdus["LENS"].data + hdus["LENSED"].data, atol=1e-12
+        )
+        source = hdus["SRCPLANE"]
+        assert source.data.shape == products.SOURCE_PLANE_SHAPE
+        assert source.header["PIXSCALE"] > 0
+        assert source.data.max() > 0
+
+
+def test_pixelized_products_and_adapt_image(mock_dir, tmp_path):
+    problem = phases.sp_problem(mock_dir, tmp_path, tiny_settings())
+    dataset = problem.dataset
+    x, y = overlay_centres(dataset.mask, PIXEL, (12, 12))
+    source = models.MeshSourceModel(x, y, "constant")
+    model = models.PhaseModel(SP_SPECS, source)
+    result = fit(dataset, model.build({**SP_FULL_VALUES, "regularization.coefficient": 1.0}))
+    products.write_model_fits(tmp_path / "model.fits", result, {})
+    products.write_adapt_image(tmp_path / "adapt.fits", result)
+    with fits.open(tmp_path / "model.fits") as hdus:
+        assert np.isfinite(hdus["SRCPLANE"].data).all()
+        assert hdus["SRCPLANE"].header["BUNIT"] == "electron/s"
+    adapt = products.read_adapt_image(tmp_path / "adapt.fits", dataset.mask)
+    np.testing.assert_allclose(adapt, result.lensed_source_image)
+
+
+# -- phases end to end ------------------------------------------------------------------
+def test_missing_earlier_phase_is_named(mock_dir, tmp_path):
+    with pytest.raises(phases.PhaseInputError, match=r"sp/result.json not found"):
+        phases.run_phase("spix1", mock_dir, tmp_path, tiny_settings())
+
+
+@pytest.fixture(scope="module")
+def sp_run(mock_dir, tmp_path_factory):
+    results = tmp_path_factory.mktemp("results")
+    result = phases.run_phase("sp", mock_dir, results, tiny_settings(), seed=3, threads=1)
+    return results, result
+
+
+def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):
+    results, result = sp_run
+    folder = results / "sp"
+    for name in ("result.json", "samples.csv", "model.fits", "phase.log"):
+        assert (folder / name).is_file()
+    assert not list(folder.glob("checkpoint-*"))
+    assert PhaseResult.read(folder) == result
+    summary = json.loads((folder / "result.json").read_text())
+    files = ("data.fits", "noise_map.fits", "psf.fits")
+    assert set(summary["input_checksums"]) == {str(mock_dir / f) for f in files}
+    assert summary["sampler"]["n_rejected"] >= 0
+    assert "mass.axis_ratio" in summary["median"]
+    assert "lens_light.set_1.angle" in summary["max_likelihood"]
+    assert "phase sp" in (folder / "phase.log").read_text()
+
+
+def test_lens_light_and_mass_models_rebuild_from_json(sp_run):
+    results, result = sp_run
+    folder = results / "sp"
+    sets, intensities = phases.lens_light_model(folder)
+    best = result.max_likelihood
+    assert len(sets) == 2
+    assert [i.size for i in intensities] == [30, 30]
+    assert sets[1].centre == pytest.approx(
+        (best["lens_light.set_0.centre_x"], best["lens_light.set_0.centre_y"])
+    )
+    assert sets[1].ell_comps == pytest.approx(
+        (best["lens_light.set_1.ell_comps_1"], best["lens_light.set_1.ell_comps_2"])
+    )
+    assert all(np.all(i >= 0) for i in intensities)
+    sie, shear = phases.mass_model(folder)
+    assert isinstance(sie, SIE)
+    assert sie.einstein_radius == pytest.approx(best["mass.einstein_radius"])
+    assert shear.gamma_2 == pytest.approx(best["shear.gamma_2"])
+    q, angle = axis_ratio_and_angle_from(ell_comps_from(sie.axis_ratio, sie.angle))
+    assert q == pytest.approx(best["mass.axis_ratio"])
+    assert angle == pytest.approx(best["mass.angle"])
+
+
+def test_interrupted_phase_resumes_to_the_uninterrupted_result(sp_run, mock_dir, tmp_path):
+    _, reference = sp_run
+    config = tmp_path / "config.yaml"
+    config.write_text(
+        "slam:\n"
+        f"  mask_radius: {MASK_RADIUS}\n"
+        "  lp_sub_size_centre: 4\n"
+        "  samplers:\n"
+        "    sp: {n_live: 36, dlogz: 0.5, progress_every: 1000000000, checkpoint_every: 0.2}\n"
+    )
+    results = tmp_path / "results"
+    command = [sys.executable, "-m", "mgelens", "phase", "sp", "--lens-dir", str(mock_dir)]
+    command += ["--results", str(results), "--config", str(config), "--seed", "3"]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while not list((results / "sp").glob("checkpoint-*.pickle")):
+            assert process.poll() is None, "the phase ended before writing a checkpoint"
+            assert time.monotonic() < deadline, "no checkpoint within 60 s"
+            time.sleep(0.02)
+    finally:
+        process.kill()
+        process.wait()
+    assert not (results / "sp" / "result.json").exists()
+    settings = settings_from_mapping(
+        {
+            "mask_radius": MASK_RADIUS,
+            "lp_sub_size_centre": 4,
+            "samplers": {"sp": {"n_live": 36, "dlogz": 0.5, "progress_every": 1e9}},
+        }
+    )
+    resumed = phases.run_phase("sp", mock_dir, results, settings, seed=3, threads=1)
+    assert resumed.output.n_resumes == 1
+    np.testing.assert_array_equal(resumed.output.samples, reference.output.samples)
+    np.testing.assert_array_equal(resumed.output.log_weights, reference.output.log_weights)
+    assert resumed.output.log_evidence == reference.output.log_evidence
+    assert resumed.output.n_calls == reference.output.n_calls
+    assert resumed.max_likelihood == reference.max_likelihood

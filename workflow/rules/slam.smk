@@ -1,0 +1,33 @@
+"""The SLaM chain (SPEC §8): SP -> SPix1 -> SPix2 -> LIGHT -> MASS, one rule per phase.
+
+A phase reads only earlier phases' folders, so deleting one result reruns just that phase
+(and those after it). Build a lens's chain with
+`snakemake -j2 results/M1/mass/result.json`.
+"""
+
+rule phase:
+    input:
+        unpack(phase_inputs),
+    output:
+        result="results/{lens}/{phase}/result.json",
+        samples="results/{lens}/{phase}/samples.csv",
+        model="results/{lens}/{phase}/model.fits",
+    log:
+        "logs/{lens}/{phase}.log",
+    benchmark:
+        "results/{lens}/benchmarks/{phase}.tsv"
+    params:
+        mgelens_version=MGELENS_VERSION,
+        lens_dir=lens_imaging_folder,
+        options=phase_options,
+    threads: 2
+    resources:
+        mem_mb=phase_mem_mb,
+        runtime=600,
+    retries: 1
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens phase {wildcards.phase} --lens-dir {params.lens_dir:q} "
+        "--results results/{wildcards.lens} --threads {threads} {params.options} "
+        "> {log:q} 2>&1"
