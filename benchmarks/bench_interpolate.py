@@ -15,10 +15,10 @@ Run from the repository root: ``python benchmarks/bench_interpolate.py [--thread
 import argparse
 import resource
 import time
-import tracemalloc
 
 import numba
 import numpy as np
+from common import peak_traced_mb, report_timings
 
 from mgelens.source.interpolate import natural_neighbour_weights, nearest_cell_weights
 from mgelens.source.mesh import VoronoiMesh
@@ -32,34 +32,6 @@ def random_disc(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarra
     r = np.sqrt(rng.random(n))
     theta = 2.0 * np.pi * rng.random(n)
     return r * np.cos(theta), r * np.sin(theta)
-
-
-def timings(function, repeats: int) -> tuple[float, float, float]:
-    """Median and minimum wall time and median process CPU time (s) after one warm-up."""
-    function()
-    wall, cpu = [], []
-    for _ in range(repeats):
-        start_wall, start_cpu = time.perf_counter(), time.process_time()
-        function()
-        wall.append(time.perf_counter() - start_wall)
-        cpu.append(time.process_time() - start_cpu)
-    return float(np.median(wall)), float(np.min(wall)), float(np.median(cpu))
-
-
-def report(name: str, function, repeats: int) -> None:
-    median, minimum, cpu = timings(function, repeats)
-    print(f"{name}: {median:.4f}")
-    print(f"{name}_min: {minimum:.4f}")
-    print(f"{name}_cpu: {cpu:.4f}")
-
-
-def peak_traced_mb(function) -> float:
-    """Peak memory (MB) traced by ``tracemalloc`` during one ``function()`` call."""
-    tracemalloc.start()
-    function()
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
-    return peak / 1e6
 
 
 def main() -> None:
@@ -81,13 +53,15 @@ def main() -> None:
     print(f"numba_threads: {numba.get_num_threads()}")
     print(f"n_mesh: {N_MESH}")
     print(f"n_queries: {N_QUERIES}")
-    report("voronoi_mesh_1500_s", lambda: VoronoiMesh.from_points(mx, my), args.repeats)
-    report(
+    report_timings("voronoi_mesh_1500_s", lambda: VoronoiMesh.from_points(mx, my), args.repeats)
+    report_timings(
         "nn_weights_180k_queries_s",
         lambda: natural_neighbour_weights(mesh, qx, qy),
         args.repeats,
     )
-    report("nearest_cell_180k_queries_s", lambda: nearest_cell_weights(mesh, qx, qy), args.repeats)
+    report_timings(
+        "nearest_cell_180k_queries_s", lambda: nearest_cell_weights(mesh, qx, qy), args.repeats
+    )
     indptr, _, _ = natural_neighbour_weights(mesh, qx, qy)
     print(f"nn_mean_row_length: {indptr[-1] / N_QUERIES:.2f}")
     peak = peak_traced_mb(lambda: natural_neighbour_weights(mesh, qx, qy))

@@ -10,11 +10,10 @@ timed on the same points when lenstronomy is importable. Memory: the peak traced
 
 import argparse
 import resource
-import time
-import tracemalloc
 
 import numba
 import numpy as np
+from common import peak_traced_mb, report_timings
 
 from mgelens.mass import EPL, SIE, ExternalShear
 
@@ -23,38 +22,6 @@ AXIS_RATIO = 0.75
 ANGLE = 30.0
 EINSTEIN_RADIUS = 1.2
 SLOPE = 2.3
-
-
-def timings(function, repeats: int) -> tuple[float, float, float]:
-    """Median and minimum wall time and median process CPU time (s) of ``function()``.
-
-    One warm-up call comes first. CPU time sums all threads; on a machine shared with
-    other jobs it is a steadier figure than wall time.
-    """
-    function()
-    wall, cpu = [], []
-    for _ in range(repeats):
-        start_wall, start_cpu = time.perf_counter(), time.process_time()
-        function()
-        wall.append(time.perf_counter() - start_wall)
-        cpu.append(time.process_time() - start_cpu)
-    return float(np.median(wall)), float(np.min(wall)), float(np.median(cpu))
-
-
-def report(name: str, function, repeats: int) -> None:
-    median, minimum, cpu = timings(function, repeats)
-    print(f"{name}: {median:.4f}")
-    print(f"{name}_min: {minimum:.4f}")
-    print(f"{name}_cpu: {cpu:.4f}")
-
-
-def peak_traced_mb(function) -> float:
-    """Peak memory (MB) traced by ``tracemalloc`` during one ``function()`` call."""
-    tracemalloc.start()
-    function()
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
-    return peak / 1e6
 
 
 def lenstronomy_epl(x: np.ndarray, y: np.ndarray):
@@ -98,15 +65,15 @@ def main() -> None:
 
     print(f"numba_threads: {numba.get_num_threads()}")
     print(f"n_points: {N_POINTS}")
-    report("epl_deflections_1e6_s", lambda: epl.deflections(x, y), args.repeats)
-    report("epl_q0.3_deflections_1e6_s", lambda: epl_flat.deflections(x, y), args.repeats)
-    report("sie_deflections_1e6_s", lambda: sie.deflections(x, y), args.repeats)
-    report("shear_deflections_1e6_s", lambda: shear.deflections(x, y), args.repeats)
+    report_timings("epl_deflections_1e6_s", lambda: epl.deflections(x, y), args.repeats)
+    report_timings("epl_q0.3_deflections_1e6_s", lambda: epl_flat.deflections(x, y), args.repeats)
+    report_timings("sie_deflections_1e6_s", lambda: sie.deflections(x, y), args.repeats)
+    report_timings("shear_deflections_1e6_s", lambda: shear.deflections(x, y), args.repeats)
     reference = lenstronomy_epl(x, y)
     if reference is None:
         print("lenstronomy_epl_deflections_1e6_s: n/a (lenstronomy not importable)")
     else:
-        report("lenstronomy_epl_deflections_1e6_s", reference, args.repeats)
+        report_timings("lenstronomy_epl_deflections_1e6_s", reference, args.repeats)
     print(f"epl_deflections_peak_traced_mb: {peak_traced_mb(lambda: epl.deflections(x, y)):.1f}")
     print(f"process_peak_rss_mb: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3:.0f}")
 

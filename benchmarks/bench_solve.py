@@ -11,23 +11,13 @@ OPENBLAS_NUM_THREADS / OMP_NUM_THREADS.
 """
 
 import os
-import tracemalloc
 
 import numpy as np
 from bench_likelihood import inversion_system
-from common import median_time, peak_memory_mb, report, set_threads
+from common import median_time, peak_memory_mb, peak_traced_mb, report, set_threads
 
 from mgelens.inversion.evidence import log_det_cholesky, log_det_regularization
 from mgelens.inversion.solve import reconstruction_positive_negative, reconstruction_positive_only
-
-
-def traced_peak_mb(func) -> float:
-    """Peak of the memory traced by ``tracemalloc`` (numpy included) during ``func()``, MB."""
-    tracemalloc.start()
-    func()
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
-    return peak / 1e6
 
 
 def main() -> None:
@@ -51,7 +41,7 @@ def main() -> None:
         f"logdet_dense_FH_{source_block.shape[0]}_s",
         median_time(lambda: log_det_cholesky(source_block)),
     )
-    report("fnnls_traced_peak_mb", traced_peak_mb(lambda: reconstruction_positive_only(Q, D)), "MB")
+    report("fnnls_traced_peak_mb", peak_traced_mb(lambda: reconstruction_positive_only(Q, D)), "MB")
     report("peak_memory_mb", peak_memory_mb(), "MB")
 
 

@@ -2,6 +2,7 @@
 
 import resource
 import time
+import tracemalloc
 
 import numba
 import numpy as np
@@ -31,3 +32,36 @@ def report(name: str, value: float, unit: str = "s") -> None:
 
 def set_threads(n: int = 2) -> None:
     numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+
+def timings(function, repeats: int) -> tuple[float, float, float]:
+    """Median and minimum wall time and median process CPU time (s) after one warm-up.
+
+    CPU time sums all threads; on a machine shared with other jobs it is a steadier figure
+    than wall time.
+    """
+    function()
+    wall, cpu = [], []
+    for _ in range(repeats):
+        start_wall, start_cpu = time.perf_counter(), time.process_time()
+        function()
+        wall.append(time.perf_counter() - start_wall)
+        cpu.append(time.process_time() - start_cpu)
+    return float(np.median(wall)), float(np.min(wall)), float(np.median(cpu))
+
+
+def report_timings(name: str, function, repeats: int) -> None:
+    """Print ``name`` (median wall), ``name_min`` and ``name_cpu`` of ``function()``."""
+    median, minimum, cpu = timings(function, repeats)
+    print(f"{name}: {median:.4f}")
+    print(f"{name}_min: {minimum:.4f}")
+    print(f"{name}_cpu: {cpu:.4f}")
+
+
+def peak_traced_mb(function) -> float:
+    """Peak memory (MB) traced by ``tracemalloc`` during one ``function()`` call."""
+    tracemalloc.start()
+    function()
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return peak / 1e6
