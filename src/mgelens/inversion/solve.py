@@ -471,13 +471,7 @@ def _append_column(U, p, y, q_row, order, d_new, work):
     u = work[:p]
     for k in range(p):
         u[k] = q_row[order[k]]
-    for k in range(p):
-        u[k] /= U[k, k]
-        uk = u[k]
-        row = U[k, k + 1 : p]
-        tail = u[k + 1 : p]
-        for i in range(row.size):
-            tail[i] -= uk * row[i]
+    _forward_substitute_transposed(U, p, u, u)
     pivot = q_row[order[p]]
     projected = d_new
     for k in range(p):
