@@ -13,8 +13,9 @@ from astropy.io import fits
 from mgelens import simulate
 from mgelens.fit import MGESource, fit
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
+from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
-from mgelens.mass import EPL, SIE, ExternalShear
+from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
 from mgelens.pipeline import models, phases, products
 from mgelens.pipeline.settings import (
     PHASES,
@@ -234,6 +235,27 @@ def test_regularization_from_values():
     assert adaptive.signal_scale == 0.5
 
 
+# -- positions penalty --------------------------------------------------------------------
+def test_multiple_image_positions_and_penalty():
+    mass = (SIE((0.0, 0.0), 1.2, 0.8, 30.0), ExternalShear(0.01, 0.0))
+    x, y = pixel_centres((73, 73), 0.05)
+    outside = np.hypot(x, y) > 1.8
+    x, y = np.where(outside, np.nan, x), np.where(outside, np.nan, y)
+    source_centre = (0.05, 0.02)
+    positions = models.multiple_image_positions(mass, source_centre, x, y)
+    assert len(positions) == 4
+    bx, by = ray_trace(mass, positions[:, 0], positions[:, 1])
+    np.testing.assert_allclose(bx, source_centre[0], atol=1e-3)
+    np.testing.assert_allclose(by, source_centre[1], atol=1e-3)
+    penalty = models.PositionsPenalty(positions, 0.2)
+    assert penalty.separation(mass) < 2e-3
+    assert penalty.log_likelihood(mass) is None
+    demagnified = (SIE((0.0, 0.0), 0.5, 0.8, 30.0), ExternalShear(0.01, 0.0))
+    excess = penalty.separation(demagnified) - 0.2
+    assert excess > 0.5
+    assert penalty.log_likelihood(demagnified) == pytest.approx(-1e10 - 1e8 * excess)
+
+
 # -- settings ---------------------------------------------------------------------------
 def test_profiles_paper_and_quick():
     paper = profile_settings("paper")
@@ -245,6 +267,8 @@ def test_profiles_paper_and_quick():
     assert all(quick.samplers[p].n_live <= 60 for p in PHASES)
     assert 500 <= quick.source_pixels <= 800
     assert quick.positive_only
+    assert quick.positions_penalty
+    assert not paper.positions_penalty
 
 
 def test_settings_from_yaml_override_the_profile(tmp_path):
@@ -284,6 +308,12 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
 def test_invalid_settings_name_the_key(section, message):
     with pytest.raises(SettingsError, match=message):
         settings_from_mapping(section)
+
+
+def test_sampler_for_raises_dynesty_live_points_to_its_minimum():
+    quick = profile_settings("quick").samplers["light"]
+    assert phases.sampler_for(quick, 14).n_live == quick.n_live == 30
+    assert phases.sampler_for(quick, 18).n_live == 38
 
 
 # -- small mock and products ------------------------------------------------------------
@@ -390,6 +420,8 @@ def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):
     assert "mass.axis_ratio" in summary["median"]
     assert "lens_light.set_1.angle" in summary["max_likelihood"]
     assert "phase sp" in (folder / "phase.log").read_text()
+    positions = summary["max_likelihood_fit"]["positions"]
+    assert positions["threshold"] >= 0.2
 
 
 def test_lens_light_and_mass_models_rebuild_from_json(sp_run):

@@ -24,11 +24,12 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import optimize
 from sklearn.exceptions import ConvergenceWarning
 
 from mgelens.fit import LensModel, MGESource, PixelizedSource
 from mgelens.light import MGESet, log_spaced_sigmas
-from mgelens.mass import EPL, SIE, SLOPE_RANGE, ExternalShear
+from mgelens.mass import EPL, SIE, SLOPE_RANGE, ExternalShear, ray_trace
 from mgelens.search.model import Parameter, ParameterSpace
 from mgelens.search.priors import Gaussian, LogUniform, Prior, TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult, passed_priors
@@ -178,6 +179,82 @@ def mass_profiles(values: Mapping[str, float]) -> tuple:
     if not SLOPE_RANGE[0] < slope < SLOPE_RANGE[1]:
         raise UnphysicalSample(f"EPL slope {slope} outside {SLOPE_RANGE}")
     return EPL.from_ell_comps(centre, ell_comps, einstein_radius, slope), shear
+
+
+# -- multiple-image positions (SPEC §12.21) ---------------------------------------------
+POSITIONS_PENALTY_OFFSET = -1e10
+"""ln L of a sample whose positions do not re-converge, minus 1e8 per arcsec of excess:
+below any fit's ln L, above a rejected sample's −1e99."""
+POSITIONS_PENALTY_SLOPE = 1e8
+
+
+def multiple_image_positions(
+    mass: Sequence,
+    source_centre: tuple[float, float],
+    x: np.ndarray,
+    y: np.ndarray,
+    tolerance: float = 1e-3,
+) -> np.ndarray:
+    """Image-plane positions (n, 2) arcsec whose rays land on ``source_centre``.
+
+    Starting points are the local minima of |β(θ) − β_s| on the native grid of points
+    (x, y) (2D arrays, unmasked points only, others NaN); each is refined with
+    Nelder–Mead and kept if it traces to within ``tolerance`` arcsec of the source centre.
+    Positions closer than 0.05″ are merged.
+    """
+    bx, by = ray_trace(mass, np.nan_to_num(x), np.nan_to_num(y))
+    distance = np.hypot(bx - source_centre[0], by - source_centre[1])
+    distance[np.isnan(x)] = np.inf
+    padded = np.pad(distance, 1, constant_values=np.inf)
+    neighbours = [
+        padded[1 + dr : padded.shape[0] - 1 + dr, 1 + dc : padded.shape[1] - 1 + dc]
+        for dr in (-1, 0, 1)
+        for dc in (-1, 0, 1)
+        if dr or dc
+    ]
+    minima = np.isfinite(distance) & np.all([distance <= n for n in neighbours], axis=0)
+    positions: list[np.ndarray] = []
+    for start in np.column_stack([x[minima], y[minima]]):
+        refined = optimize.minimize(
+            lambda p: float(np.hypot(*np.subtract(ray_trace(mass, p[0], p[1]), source_centre))),
+            start,
+            method="Nelder-Mead",
+            options={"xatol": 1e-7, "fatol": 1e-9},
+        )
+        close = [np.hypot(*(refined.x - q)) < 0.05 for q in positions]
+        if refined.fun < tolerance and not any(close):
+            positions.append(refined.x)
+    return np.array(positions).reshape(-1, 2)
+
+
+@dataclass(frozen=True, eq=False)
+class PositionsPenalty:
+    """Multiple images of the source centre must re-converge in the source plane
+    (optional, SPEC §12.21; anchor ``positions_likelihood_from(factor=3, minimum=0.2″)``).
+
+    A mass model whose traced ``positions`` (n, 2) arcsec spread more than ``threshold``
+    (maximum pairwise separation, arcsec) in the source plane is not fitted: it gets
+    ln L = −1e10 − 1e8 × excess, which steers the sampler away from unphysical
+    (e.g. demagnified) solutions without the cost of an inversion.
+    """
+
+    positions: np.ndarray
+    threshold: float
+
+    def separation(self, mass: Sequence) -> float:
+        """Maximum pairwise source-plane separation (arcsec) of the traced positions."""
+        bx, by = ray_trace(mass, self.positions[:, 0], self.positions[:, 1])
+        return float(np.max(np.hypot(bx[:, None] - bx, by[:, None] - by)))
+
+    def log_likelihood(self, mass: Sequence) -> float | None:
+        """The penalty ln L, or ``None`` if the positions re-converge."""
+        excess = self.separation(mass) - self.threshold
+        if excess <= 0.0:
+            return None
+        return POSITIONS_PENALTY_OFFSET - POSITIONS_PENALTY_SLOPE * excess
+
+    def describe(self) -> dict:
+        return {"positions": self.positions.tolist(), "threshold": self.threshold}
 
 
 # -- sources ----------------------------------------------------------------------------

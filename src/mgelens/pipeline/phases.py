@@ -17,8 +17,13 @@ one phase folder out.
   seed, fit settings and input checksums: a rerun with the same inputs resumes, a rerun
   with changed inputs starts afresh. The checkpoint is deleted once the results are in.
 
-A phase reads only earlier phases' ``result.json`` (and SPix1's adapt image), so any phase
-can be rerun alone. Every file is written atomically, ``result.json`` last.
+A phase reads only earlier phases' ``result.json`` and ``samples.csv`` (and SPix1's adapt
+image), so any phase can be rerun alone. Every file is written atomically, ``result.json``
+last.
+
+SP also records the multiple images of its source centre; with
+``settings.positions_penalty`` SPix1 and MASS give mass models whose images do not
+re-converge in the source plane a penalty instead of a fit (SPEC §12.21).
 
 Chain (SPEC §8.1): SP (MGE lens light, SIE + shear, MGE source) → SPix1 (lens light fixed,
 SIE + shear passed, overlay mesh) → SPix2 (lens light and mass fixed, k-means mesh
@@ -42,7 +47,7 @@ from threadpoolctl import threadpool_limits
 
 from mgelens import mask as mask_module
 from mgelens.atomic import atomic_path, write_json
-from mgelens.fit import FitDataset, FitResult, FitSettings, figure_of_merit, fit
+from mgelens.fit import FitDataset, FitResult, FitSettings, MGESource, figure_of_merit, fit
 from mgelens.geometry import axis_ratio_and_angle_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
@@ -132,15 +137,12 @@ def read_phase(results_dir: str | Path, name: str) -> EarlierPhase:
         If its ``result.json`` is missing, naming the command that makes it.
     """
     folder = Path(results_dir) / name
-    path = folder / RESULT_FILE
-    if not path.is_file():
+    if not (folder / RESULT_FILE).is_file():
         raise PhaseInputError(
-            f"{path} not found: run phase {name!r} first "
+            f"{folder / RESULT_FILE} not found: run phase {name!r} first "
             f"(mgelens phase {name} --results {results_dir} ...)"
         )
-    record = json.loads(path.read_text()).get("max_likelihood_fit")
-    if record is None:
-        raise PhaseInputError(f"{path} has no max_likelihood_fit block: rerun phase {name!r}")
+    record = _record(folder)
     return EarlierPhase(folder, PhaseResult.read(folder), record)
 
 
@@ -204,6 +206,7 @@ class PhaseProblem:
     model: models.PhaseModel
     inputs: tuple[Path, ...]
     mask_radius: float
+    positions: models.PositionsPenalty | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,12 +214,14 @@ class PhaseLikelihood:
     """ln L (the log evidence when the source is pixelized) of a free-parameter vector.
 
     Samples the profiles cannot represent or the fit cannot solve return −1e99 (SPEC §8.4);
-    the sampler counts them.
+    the sampler counts them. With a positions penalty, mass models whose multiple images
+    do not re-converge get the penalty instead of a fit.
     """
 
     dataset: FitDataset
     space: ParameterSpace
     model: models.PhaseModel
+    positions: models.PositionsPenalty | None = None
 
     def __call__(self, x: np.ndarray) -> float:
         values = self.space.values(x)
@@ -225,21 +230,40 @@ class PhaseLikelihood:
         except models.UnphysicalSample as error:
             logger.debug("rejected sample: %s", error)
             return REJECTED_LOG_LIKELIHOOD
+        if self.positions is not None:
+            penalty = self.positions.log_likelihood(lens_model.mass)
+            if penalty is not None:
+                return penalty
         value, reason = figure_of_merit(self.dataset, lens_model)
         if reason:
             logger.debug("rejected sample: %s", reason)
         return value
 
 
-def sampler_for(settings: SamplerSettings) -> SamplerSettings:
-    """``settings``, with nautilus replaced by dynesty_static if it is not installed."""
+def sampler_for(settings: SamplerSettings, n_free: int) -> SamplerSettings:
+    """``settings`` made runnable for ``n_free`` free parameters.
+
+    Nautilus is replaced by dynesty_static if it is not installed, and dynesty's live
+    points are raised to 2 n_free + 2 if fewer (dynesty calls n_live ≤ 2 n_dim "extremely
+    risky"; e.g. the quick profile's LIGHT phase with 6 sets and a point set). Both are
+    logged.
+    """
     if settings.method == "nautilus" and importlib.util.find_spec("nautilus") is None:
         logger.warning(
             "nautilus is not installed (pip install nautilus-sampler): using dynesty_static "
             "with n_live = %d instead",
             settings.n_live,
         )
-        return dataclasses.replace(settings, method="dynesty_static")
+        settings = dataclasses.replace(settings, method="dynesty_static")
+    minimum = 2 * n_free + 2
+    if settings.method != "nautilus" and settings.n_live < minimum:
+        logger.warning(
+            "n_live = %d is too few for %d free parameters: using %d",
+            settings.n_live,
+            n_free,
+            minimum,
+        )
+        settings = dataclasses.replace(settings, n_live=minimum)
     return settings
 
 
@@ -305,7 +329,7 @@ def _write_outputs(
     folder: Path, phase: PhaseResult, best: FitResult, record: dict, lens: str
 ) -> None:
     provenance = {"PHASE": phase.phase, "LENS": lens[:68], "PROFILE": phase.settings["profile"]}
-    products.write_model_fits(folder / "model.fits", best, provenance)
+    products.write_model_fits(folder / MODEL_FILE, best, provenance)
     if phase.phase == "spix1":
         products.write_adapt_image(folder / ADAPT_IMAGE_FILE, best)
     with atomic_path(folder / SAMPLES_FILE) as temporary:
@@ -317,7 +341,7 @@ def _solve(
     problem: PhaseProblem, folder: Path, settings: SlamSettings, seed: int, lens_dir: Path
 ) -> PhaseResult:
     checksums = input_checksums(problem.inputs)
-    sampler = sampler_for(settings.samplers[problem.name])
+    sampler = sampler_for(settings.samplers[problem.name], problem.space.n_free)
     fingerprint = {
         "phase": problem.name,
         "space": problem.space.to_dict(),
@@ -336,7 +360,7 @@ def _solve(
         sampler.n_live,
         problem.dataset.data.size,
     )
-    likelihood = PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    likelihood = PhaseLikelihood(problem.dataset, problem.space, problem.model, problem.positions)
     output = run_nested(likelihood, problem.space, sampler, checkpoint, seed, logger.info)
     phase = PhaseResult(
         phase=problem.name,
@@ -349,12 +373,16 @@ def _solve(
             "model": problem.model.describe(),
             "slam": settings.to_dict(),
             "fit": dataclasses.asdict(problem.dataset.settings),
+            "positions": None if problem.positions is None else problem.positions.describe(),
         },
         input_checksums=checksums,
     )
     values = problem.space.values(output.max_likelihood())
     best = fit(problem.dataset, problem.model.build(values))
-    _write_outputs(folder, phase, best, fit_record(best, problem.model, values), lens_dir.name)
+    record = fit_record(best, problem.model, values)
+    if isinstance(best.model.source, MGESource):
+        record["positions"] = image_positions(best, settings).describe()
+    _write_outputs(folder, phase, best, record, lens_dir.name)
     for stale in folder.glob(f"{CHECKPOINT_PREFIX}*"):
         stale.unlink()
     logger.info(
@@ -367,6 +395,43 @@ def _solve(
         output.runtime,
     )
     return phase
+
+
+def image_positions(result: FitResult, settings: SlamSettings) -> models.PositionsPenalty:
+    """Multiple images of the MGE source centre of a fit (SP) and their threshold.
+
+    Threshold = max(factor × the images' own source-plane scatter, minimum) (SPEC §12.21).
+    """
+    dataset = result.dataset
+    x, y = pixel_centres(dataset.mask.shape, dataset.imaging.pixel_scale)
+    x, y = np.where(dataset.mask, np.nan, x), np.where(dataset.mask, np.nan, y)
+    source_centre = result.model.source.sets[0].centre
+    positions = models.multiple_image_positions(result.model.mass, source_centre, x, y)
+    scatter = (
+        models.PositionsPenalty(positions, 0.0).separation(result.model.mass)
+        if len(positions) > 1
+        else 0.0
+    )
+    threshold = max(settings.positions_factor * scatter, settings.positions_minimum)
+    return models.PositionsPenalty(positions, threshold)
+
+
+def positions_penalty(sp: EarlierPhase, settings: SlamSettings) -> models.PositionsPenalty | None:
+    """The positions penalty from SP's result if the settings ask for it (and SP found at
+    least two images), else ``None``."""
+    if not settings.positions_penalty:
+        return None
+    record = sp.record.get("positions") or {"positions": []}
+    positions = np.asarray(record["positions"], dtype=float).reshape(-1, 2)
+    if len(positions) < 2:
+        logger.warning(
+            "SP found %d image(s) of its source centre: no positions penalty", len(positions)
+        )
+        return None
+    logger.info(
+        "positions penalty: %d images, threshold %.3g arcsec", len(positions), record["threshold"]
+    )
+    return models.PositionsPenalty(positions, float(record["threshold"]))
 
 
 # -- the five problems -------------------------------------------------------------------
@@ -400,6 +465,7 @@ def spix1_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> 
         models.PhaseModel(sp.lens_light_specs, source),
         (*_imaging_files(lens_dir), *sp.files),
         radius,
+        positions_penalty(sp, settings),
     )
 
 
@@ -462,18 +528,21 @@ def light_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> 
 
 def mass_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """MASS: lens light (LIGHT) and source (SPix2) fixed, EPL + shear (8)."""
-    spix1, spix2 = read_phase(results_dir, "spix1"), read_phase(results_dir, "spix2")
+    sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
+    spix2 = read_phase(results_dir, "spix2")
     light = read_phase(results_dir, "light")
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(light.result))
     kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
     source = kmeans.fixed(spix2.result.max_likelihood)
+    earlier = (*sp.files, *spix1.files, *spix2.files, *light.files, adapt_path)
     return PhaseProblem(
         "mass",
         dataset,
         models.mass_space(light.result, spix1.result, spix2.result, settings.prior_passing),
         models.PhaseModel(light.lens_light_specs, source),
-        (*_imaging_files(lens_dir), *spix1.files, *spix2.files, *light.files, adapt_path),
+        (*_imaging_files(lens_dir), *earlier),
         radius,
+        positions_penalty(sp, settings),
     )
 
 

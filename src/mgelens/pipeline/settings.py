@@ -86,6 +86,12 @@ class SlamSettings:
         Cross-point offset of the split regularization (½√A or √(A/2), SPEC §5.3).
     prior_passing : {"paper", "2024"}
         Prior-passing rule (SPEC §8.2).
+    positions_penalty : bool
+        Require the multiple images of SP's source centre to re-converge in the source
+        plane in SPix1 and MASS (SPEC §12.21; off in the paper profile, on in quick, where
+        the few live points otherwise lose the physical mode to demagnified solutions).
+    positions_factor, positions_minimum : float
+        Threshold = max(factor × SP's own source-plane scatter, minimum arcsec) (3, 0.2″).
     sub_size, lp_sub_size, lp_sub_size_centre, lp_centre_radius, use_border
         Fit settings (:class:`mgelens.fit.FitSettings`).
     samplers : mapping of phase name to SamplerSettings
@@ -107,6 +113,9 @@ class SlamSettings:
     interpolation: str = "natural_neighbour"
     cross_offset: str = "anchor"
     prior_passing: str = "paper"
+    positions_penalty: bool = False
+    positions_factor: float = 3.0
+    positions_minimum: float = 0.2
     sub_size: int = 4
     lp_sub_size: int = 4
     lp_sub_size_centre: int = 16
@@ -161,23 +170,24 @@ _PAPER_SAMPLERS = {
     "mass": SamplerSettings(method="nautilus", n_live=150),
 }
 
-_QUICK = {"method": "dynesty_static", "sample": "rwalk", "walks": 3, "dlogz": 1.0}
+_QUICK = {"method": "dynesty_static", "sample": "rwalk", "dlogz": 1.0}
 _QUICK_SAMPLERS = {
     "sp": SamplerSettings(n_live=36, **_QUICK),
     "spix1": SamplerSettings(n_live=18, **_QUICK),
     "spix2": SamplerSettings(n_live=12, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
-    "mass": SamplerSettings(n_live=24, **{**_QUICK, "walks": 5}),
+    "mass": SamplerSettings(n_live=20, **_QUICK),
 }
-"""Quick-profile samplers: dynesty random walks with 2 n_dim + 2 live points (dynesty's
-minimum is more than 2 n_dim), a short walk and a loose stopping criterion; the MASS phase,
-whose posterior is the pipeline's product, gets more live points and longer walks."""
+"""Quick-profile samplers: dynesty random walks (5 steps) with about 2 n_dim + 2 live points
+(dynesty needs more than 2 n_dim) and a loose stopping criterion. Shorter walks (3 steps)
+were tried and made SP converge to a far worse maximum."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
     {
         "paper": SlamSettings(profile="paper", samplers=_PAPER_SAMPLERS),
         "quick": SlamSettings(
             profile="quick",
+            positions_penalty=True,
             source_pixels=500,
             overlay_shape=(24, 24),
             lp_sub_size=2,
