@@ -4,8 +4,9 @@ import resource
 import time
 import tracemalloc
 
-import numba
 import numpy as np
+
+from mgelens.threads import limit_threads
 
 
 def median_time(func, repeats: int = 7, warmup: int = 1) -> float:
@@ -31,7 +32,8 @@ def report(name: str, value: float, unit: str = "s") -> None:
 
 
 def set_threads(n: int = 2) -> None:
-    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    """n numba threads, one BLAS thread (mgelens's thread policy, mgelens.threads)."""
+    limit_threads(n)
 
 
 def timings(function, repeats: int) -> tuple[float, float, float]:

@@ -16,9 +16,8 @@ import dataclasses
 import logging
 import time
 
-import numba
-
 from mgelens import simulate
+from mgelens.threads import limit_threads
 
 logger = logging.getLogger("mgelens.simulate")
 
@@ -107,9 +106,7 @@ def build_lens(args: argparse.Namespace) -> simulate.MockLens:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        if args.threads < 1:
-            raise ValueError(f"--threads must be >= 1, got {args.threads}")
-        numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+        limit_threads(args.threads)
         observation = simulate.Observation(image_size=args.image_size, sub_size=args.sub_size)
         lens = build_lens(args)
         start = time.perf_counter()

@@ -23,9 +23,9 @@ import numba
 import numpy as np
 from numba import prange
 from scipy import sparse
-from threadpoolctl import threadpool_limits
 
 from mgelens._jit import njit
+from mgelens.threads import single_threaded_blas
 
 TILE_SIZE = 8
 
@@ -103,7 +103,7 @@ def curvature_matrix(
     f[:n_dense, :n_dense] = dense.T @ (inverse_variance[:, None] * dense)
     if mapping is not None:
         mapping = mapping.tocsr()
-        with threadpool_limits(limits=1, user_api="blas"):
+        with single_threaded_blas():
             f_ss, f_ls = _tile_curvature(
                 plan.tile_indptr,
                 plan.tile_pixels,
@@ -171,6 +171,11 @@ def _tile_curvature(
                             n_union += 1
             if n_union == 0:
                 continue
+            # ascending source order: the upper-triangle scatter below is one increasing
+            # run of columns per row of F (cache friendly)
+            union[:n_union].sort()
+            for x in range(n_union):
+                position[union[x]] = x
             n_out = end - start
             g = np.zeros((n_out, n_union))
             for i in range(n_out):
@@ -199,9 +204,9 @@ def _tile_curvature(
                     wg[i, j] = wi * g[i, j]
             block = np.dot(g_t, wg)
             for x in range(n_union):
-                ax = union[x]
-                for y in range(n_union):
-                    parts_ss[c, ax, union[y]] += block[x, y]
+                row = parts_ss[c, union[x]]
+                for y in range(x, n_union):
+                    row[union[y]] += block[x, y]
             if n_light > 0:
                 light_t = np.empty((n_light, n_out))
                 for i in range(n_out):
@@ -210,4 +215,8 @@ def _tile_curvature(
                 for k in range(n_light):
                     for y in range(n_union):
                         parts_ls[c, k, union[y]] += block_ls[k, y]
-    return parts_ss.sum(axis=0), parts_ls.sum(axis=0)
+    upper = parts_ss.sum(axis=0)
+    for a in range(n_source):  # mirror the upper triangle
+        for b in range(a):
+            upper[a, b] = upper[b, a]
+    return upper, parts_ls.sum(axis=0)

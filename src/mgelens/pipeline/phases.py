@@ -41,9 +41,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-import numba
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from mgelens import mask as mask_module
 from mgelens.atomic import atomic_path, write_json
@@ -60,6 +58,7 @@ from mgelens.search.model import ParameterSpace
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
 from mgelens.search.sampler import SamplerSettings, run_nested
 from mgelens.source.image_mesh import overlay_centres
+from mgelens.threads import limit_threads
 
 logger = logging.getLogger("mgelens.pipeline")
 
@@ -75,19 +74,7 @@ class PhaseInputError(ValueError):
     """A phase's inputs are missing or inconsistent; the message names the file and fix."""
 
 
-# -- threads and logging ----------------------------------------------------------------
-def limit_threads(threads: int) -> None:
-    """Use ``threads`` threads for numba kernels and for BLAS/OpenMP (numpy, scikit-learn).
-
-    Snakemake sets ``OMP_NUM_THREADS`` and friends but not numba's thread count, and
-    libraries loaded before those variables were read ignore them, so both are set here.
-    """
-    if threads < 1:
-        raise ValueError(f"threads must be >= 1, got {threads}")
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    threadpool_limits(limits=threads)
-
-
+# -- logging ----------------------------------------------------------------
 @contextlib.contextmanager
 def _phase_log(folder: Path) -> Iterator[None]:
     """Copy ``mgelens`` log records of INFO and above into ``folder/phase.log``."""
