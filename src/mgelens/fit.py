@@ -22,7 +22,6 @@ from mgelens.convolve import trimmed_psf
 from mgelens.grid import SubGrid, pixel_centres, sub_grid, to_native
 from mgelens.imaging import Imaging
 from mgelens.inversion.evidence import (
-    log_det_cholesky,
     log_det_regularization,
     log_evidence,
     log_likelihood,
@@ -418,13 +417,11 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
     d = data_vector(
         dense, mapping, dataset.source_psf_operator, dataset.inverse_variance, residual_data
     )
-    f = curvature_matrix(dense, mapping, dataset.tile_plan, dataset.inverse_variance)
-    q = f.copy()
+    q = curvature_matrix(dense, mapping, dataset.tile_plan, dataset.inverse_variance)
     q[np.arange(n_dense), np.arange(n_dense)] += settings.mge_diagonal
     fixed_zero = None
     if operator is not None:
-        h_dense = h.toarray()
-        q[n_dense:, n_dense:] += h_dense
+        q[n_dense:, n_dense:] += h.toarray()
         if settings.positive_only and settings.force_edge_pixels_to_zero:
             fixed_zero = np.concatenate([np.zeros(n_dense, dtype=bool), operator.mesh.edge_pixels])
     solution = solve_linear_system(
@@ -461,7 +458,7 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
 
     fluxes = x[n_dense:]
     regularization_term = float(fluxes @ (h @ fluxes))
-    log_det_fh = log_det_cholesky(f[n_dense:, n_dense:] + h_dense)
+    log_det_fh = solution.log_det_source
     log_det_h = log_det_regularization(h)
     return FitResult(
         **common,

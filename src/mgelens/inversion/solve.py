@@ -91,12 +91,16 @@ class LinearSolution:
         ``fixed_zero``; all False for the unconstrained solve.
     n_iterations : int
         Outer NNLS iterations (0 for the unconstrained solve).
+    log_det_source : float or None
+        ln det of Q's source block (F_SS + H, the evidence term of SPEC §7) when a
+        ``source_block`` was given, from the same Cholesky factorisation; else None.
     """
 
     x: np.ndarray
     positive_only: bool
     active_zero: np.ndarray
     n_iterations: int
+    log_det_source: float | None = None
 
 
 def reconstruction_positive_negative(
@@ -140,6 +144,7 @@ def reconstruction_positive_only(
     initial_passive: np.ndarray | None = None,
     use_initial_passive: bool = True,
     max_iterations: int = MAX_ITERATIONS,
+    unconstrained: np.ndarray | None = None,
 ) -> NNLSResult:
     """Minimise Φ(x) = xᵀQx − 2Dᵀx subject to x ≥ 0 (fast NNLS, SPEC §6.3).
 
@@ -188,6 +193,8 @@ def reconstruction_positive_only(
         start from the empty set (classic fnnls, where w = D is the true gradient).
     max_iterations : int
         Cap on the outer and on the cumulative inner iterations.
+    unconstrained : numpy.ndarray, optional
+        Q⁻¹D if the caller has it already (the default start then needs no Cholesky of Q).
 
     Returns
     -------
@@ -210,7 +217,8 @@ def reconstruction_positive_only(
             raise ValueError(f"initial_passive must have shape ({n},), got {passive.shape}")
         order = np.flatnonzero(passive)
     elif use_initial_passive:
-        unconstrained = _cholesky_solve(Q, D)
+        if unconstrained is None:
+            unconstrained = _cholesky_solve(Q, D)
         passive = unconstrained > 0.0
         if passive.all():
             return NNLSResult(x=unconstrained, passive=passive, n_iterations=0)
@@ -289,8 +297,13 @@ def solve_linear_system(
         solution is scattered back with exact zeros. Only allowed with ``positive_only``, the
         only path where the anchor forces edge pixels to zero.
     source_block : slice, optional
-        Source unknowns for the pn sanity check (see :func:`reconstruction_positive_negative`);
-        ignored by the non-negative solve, as in the anchor.
+        Unknowns of the pixelized source. Enables the pn sanity check (see
+        :func:`reconstruction_positive_negative`; the non-negative solve ignores it, as the
+        anchor) and ``log_det_source``: Q is then factorised once in the order (free source,
+        fixed source, the rest), whose leading block is the source block, and that factor
+        gives ln det(F_SS + H), the unconstrained solution and the NNLS's initial passive
+        set (the fixed unknowns are eliminated from the factor by a small update of the
+        trailing block). ``fixed_zero`` may then mark source unknowns only.
 
     Returns
     -------
@@ -306,14 +319,16 @@ def solve_linear_system(
     """
     Q, D = _validated(Q, D)
     n = D.size
-    if not positive_only:
-        if fixed_zero is not None:
-            raise ValueError("fixed_zero applies to the positive-only solve only (SPEC §6.3)")
-        x = reconstruction_positive_negative(Q, D, source_block=source_block)
-        return LinearSolution(x, False, np.zeros(n, dtype=bool), 0)
+    if not positive_only and fixed_zero is not None:
+        raise ValueError("fixed_zero applies to the positive-only solve only (SPEC §6.3)")
     free = np.ones(n, dtype=bool) if fixed_zero is None else ~np.asarray(fixed_zero, dtype=bool)
     if free.shape != (n,):
         raise ValueError(f"fixed_zero must have shape ({n},), got {free.shape}")
+    if source_block is not None:
+        return _solve_source_first(Q, D, positive_only, free, source_block)
+    if not positive_only:
+        x = reconstruction_positive_negative(Q, D)
+        return LinearSolution(x, False, np.zeros(n, dtype=bool), 0)
     x = np.zeros(n)
     n_iterations = 0
     if free.any():
@@ -321,6 +336,78 @@ def solve_linear_system(
         x[free] = reduced.x
         n_iterations = reduced.n_iterations
     return LinearSolution(x, True, x == 0.0, n_iterations)
+
+
+def _solve_source_first(
+    Q: np.ndarray, D: np.ndarray, positive_only: bool, free: np.ndarray, source_block: slice
+) -> LinearSolution:
+    """:func:`solve_linear_system` with one Cholesky of Q ordered (A, E, M).
+
+    A = free source unknowns, E = fixed (zero) source unknowns, M = the rest. With UᵀU = Q
+    in that order, U[:A+E, :A+E] factorises the source block (its log det), and the
+    factor of the reduced system (A, M) is U_AA, U_AM and a corner Ũ with
+    ŨᵀŨ = U_EMᵀU_EM + U_MMᵀU_MM (M×M, cheap).
+    """
+    n = D.size
+    in_source = np.zeros(n, dtype=bool)
+    in_source[source_block] = True
+    if np.any(~free & ~in_source):
+        raise ValueError("fixed_zero may only mark source unknowns when source_block is given")
+    a = np.flatnonzero(in_source & free)
+    e = np.flatnonzero(in_source & ~free)
+    m = np.flatnonzero(~in_source)
+    n_a, n_s = a.size, a.size + e.size
+    order = np.concatenate([a, e, m])
+    U = Q.take(order, axis=0).take(order, axis=1)
+    # U.T is Fortran-ordered: LAPACK writes L there in place, i.e. U = Lᵀ into U.
+    _, info = scipy.linalg.lapack.dpotrf(U.T, lower=1, clean=1, overwrite_a=1)
+    if info != 0:
+        raise InversionError(f"matrix not positive definite (potrf info {info})")
+    diagonal = np.diag(U)
+    log_det_source = float(2.0 * np.sum(np.log(diagonal[:n_s])))
+    work = np.empty(n)
+    x = np.zeros(n)
+    if not positive_only:
+        y = np.empty(n)
+        _forward_substitute_transposed(U, n, D[order], y)
+        _back_substitute_scatter(U, n, y, order, work, x)
+        if not np.all(np.isfinite(x)):
+            raise InversionError("Cholesky solve gave a non-finite solution")
+        source = x[source_block]
+        if source.size and np.allclose(source, source[0]):
+            raise InversionError("pn solve rejected: all source values are equal")
+        return LinearSolution(x, False, np.zeros(n, dtype=bool), 0, log_det_source)
+    reduced_order = np.concatenate([a, m])
+    unconstrained = _reduced_solve(U, n_a, n_s, D[reduced_order], work)
+    if not np.all(np.isfinite(unconstrained)):
+        raise InversionError("Cholesky solve gave a non-finite solution")
+    # the NNLS runs on the reduced system in its original index order
+    reduced_index = np.flatnonzero(free)
+    position = np.empty(n, dtype=np.int64)
+    position[reduced_order] = np.arange(reduced_order.size)
+    result = reconstruction_positive_only(
+        Q[np.ix_(free, free)], D[free], unconstrained=unconstrained[position[reduced_index]]
+    )
+    x[free] = result.x
+    return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
+
+
+def _reduced_solve(U: np.ndarray, n_a: int, n_s: int, b: np.ndarray, work: np.ndarray):
+    """Solve the (A, M) system whose factor is U_AA, U_AM and the updated corner (see
+    :func:`_solve_source_first`); ``b`` and the result are in the order (A, M)."""
+    u_am, u_em, u_mm = U[:n_a, n_s:], U[n_a:n_s, n_s:], np.triu(U[n_s:, n_s:])
+    corner = u_em.T @ u_em + u_mm.T @ u_mm
+    try:
+        corner_u = scipy.linalg.cholesky(corner, lower=False, check_finite=False)
+    except np.linalg.LinAlgError as error:
+        raise InversionError(f"matrix not positive definite: {error}") from error
+    y_a = np.empty(n_a)
+    _forward_substitute_transposed(U, n_a, b[:n_a], y_a)
+    y_m = scipy.linalg.solve_triangular(corner_u, b[n_a:] - u_am.T @ y_a, trans="T")
+    x_m = scipy.linalg.solve_triangular(corner_u, y_m)
+    x_a = np.empty(n_a)
+    _back_substitute_scatter(U, n_a, y_a - u_am @ x_m, np.arange(n_a), work, x_a)
+    return np.concatenate([x_a, x_m])
 
 
 def _validated(Q: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
