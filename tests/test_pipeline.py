@@ -11,6 +11,7 @@ import pytest
 from astropy.io import fits
 
 from mgelens import simulate
+from mgelens.cli import main
 from mgelens.fit import MGESource, fit
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
 from mgelens.grid import pixel_centres
@@ -293,6 +294,17 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
     assert settings.samplers["sp"].n_live == 200
     assert load_settings(path, profile="quick").samplers["sp"].n_live < 200
     assert load_settings(None, "paper") == profile_settings("paper")
+    # --slam overrides (JSON from the workflow) merge over the file, sampler by sampler
+    merged = load_settings(path, None, {"mge_sets": 4, "samplers": {"mass": {"dlogz": 2.0}}})
+    assert merged.mge_sets == 4
+    assert not merged.positive_only
+    assert merged.samplers["mass"].n_live == 77
+    assert merged.samplers["mass"].dlogz == 2.0
+    only = load_settings(None, None, {"profile": "paper", "source_pixels": 900})
+    assert only.profile == "paper"
+    assert only.source_pixels == 900
+    with pytest.raises(SettingsError, match="--slam: unknown key slam.pixels"):
+        load_settings(None, None, {"pixels": 3})
 
 
 @pytest.mark.parametrize(
@@ -485,3 +497,41 @@ def test_interrupted_phase_resumes_to_the_uninterrupted_result(sp_run, mock_dir,
     assert resumed.output.log_evidence == reference.output.log_evidence
     assert resumed.output.n_calls == reference.output.n_calls
     assert resumed.max_likelihood == reference.max_likelihood
+
+
+# -- isophotes of a phase's lens light --------------------------------------------------
+def test_isophotes_of_a_phase_render_its_lens_light(sp_run, mock_dir, tmp_path):
+    """``mgelens isophotes --phase`` renders the phase's MGE lens light, PSF-convolved, on a
+    ±3.5″ grid: inside the mask it equals the fit's own lens-light image in model.fits;
+    the summary carries the phase's mass."""
+    results, result = sp_run
+    folder = results / "sp"
+    image_path, summary_path = tmp_path / "lens_light.fits", tmp_path / "isophotes.json"
+    arguments = ["isophotes", "--phase", str(folder), "--psf", str(mock_dir / "psf.fits")]
+    arguments += ["--pixel-scale", str(PIXEL), "--save-image", str(image_path)]
+    arguments += ["--summary", str(summary_path), "--out", str(tmp_path / "isophotes.csv")]
+    assert main(arguments) == 0
+    rendered = fits.getdata(image_path).astype(float)
+    assert fits.getheader(image_path)["PIXSCALE"] == PIXEL
+    assert rendered.shape == (71, 71)
+    fitted = fits.getdata(folder / "model.fits", extname="LENS")
+    cut = rendered[20:51, 20:51]
+    x, y = pixel_centres(fitted.shape, PIXEL)
+    centre = json.loads((folder / "result.json").read_text())["max_likelihood_fit"]
+    centre = centre["lens_light"]["sets"][0]["centre"]
+    radius = np.hypot(x - centre[0], y - centre[1])
+    # beyond 0.8″ the fit's coarser over-sampling (quick profile: 2×2) has converged
+    inside = (np.hypot(x, y) < MASK_RADIUS - 0.3) & (radius > 0.8)
+    assert inside.sum() > 100
+    np.testing.assert_allclose(cut[inside], fitted[inside], rtol=1e-3)
+    summary = json.loads(summary_path.read_text())
+    sie = phases.mass_model(folder)[0]
+    assert summary["mass"]["axis_ratio"] == pytest.approx(sie.axis_ratio)
+    assert summary["statistics"]["n_isophotes"] > 0
+    assert summary["inputs"]["phase"] == str(folder)
+
+
+def test_isophotes_of_a_phase_need_the_psf(sp_run, tmp_path, caplog):
+    folder = sp_run[0] / "sp"
+    assert main(["isophotes", "--phase", str(folder), "--out", str(tmp_path / "t.csv")]) == 1
+    assert "--phase needs --psf" in caplog.text

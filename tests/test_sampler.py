@@ -142,6 +142,21 @@ def test_same_seed_same_run(fast_run):
     assert again.log_evidence == fast_run.log_evidence
 
 
+def test_max_iterations_caps_the_run_with_a_warning(fast_run):
+    lines: list[str] = []
+    capped = SamplerSettings(n_live=100, progress_every=1e9, max_iterations=50)
+    output = run_nested(GaussianLikelihood(), SPACE, capped, seed=11, log=lines.append)
+    # 50 dead points (dynesty stops after the 51st) plus the 100 final live points,
+    # against ~1000 without the cap
+    assert len(output.samples) in (150, 151)
+    assert len(fast_run.samples) > 500
+    assert any("WARNING stopped at max_iterations = 50" in line for line in lines)
+    with pytest.raises(ValueError, match="dynesty samplers only"):
+        SamplerSettings(method="nautilus", max_iterations=10)
+    with pytest.raises(ValueError, match="max_iterations must be >= 1"):
+        SamplerSettings(max_iterations=0)
+
+
 def test_rejected_samples_are_counted():
     likelihood = GaussianLikelihood(reject_below=-2.0)
     output = run_nested(likelihood, SPACE, FAST, seed=5, log=lambda _: None)

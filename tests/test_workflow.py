@@ -49,6 +49,10 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     counts = job_counts(result.stdout + result.stderr)
     assert counts["simulate_mock"] == 3
     assert counts["preview"] == 3
+    # the default target is the whole DAG: five phases and isophotes per lens, summary
+    assert counts["phase"] == 15
+    assert counts["isophotes"] == 3
+    assert counts["summary"] == 1
     assert counts["all"] == 1
     assert not list(tmp_path.iterdir()) or {p.name for p in tmp_path.iterdir()} <= {".snakemake"}
 
@@ -62,8 +66,10 @@ def test_dry_run_of_one_lens_slam_chain_runs_five_phases(tmp_path):
     assert counts["simulate_mock"] == 1
     for phase in ("sp", "spix1", "spix2", "light", "mass"):
         assert f"mgelens phase {phase} " in output
-    # the sheet's mask radius, MGE complexity and point set reach the command line
-    assert "--mask-radius 1.6 --mge-sets 4 --point-set yes --profile quick" in output
+    # the sheet's mask radius, MGE complexity and point set reach the command line, and
+    # the config's slam: section as JSON
+    assert "--mask-radius 1.6 --mge-sets 4 --point-set yes" in output
+    assert """--slam '{"profile": "quick"}'""" in output
 
 
 def test_dry_run_of_the_population_sample(tmp_path):
@@ -96,6 +102,8 @@ SHEET_HEADER = "lens\tkind\tmock\tinput\tmask_radius\tmge_sets\tpoint_set\tz_len
     [
         ("population_seed: -1\n", None, "population_seed"),
         ("samples: missing.tsv\n", None, "missing.tsv not found"),
+        ("slam:\n  source_pixel: 500\n", None, "config: unknown key slam.source_pixel"),
+        ("slam:\n  samplers: {mass: {n_live: 1}}\n", None, "slam.samplers.mass: n_live"),
         ("data_dir: /nowhere\n", "R1\treal\t\tslacsX\t3.0\t2\tno\t0.2\t0.6\n",
          "real lens 'R1': data.fits, noise_map.fits, psf.fits not found in /nowhere/slacsX"),
     ],

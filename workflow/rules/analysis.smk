@@ -1,10 +1,11 @@
-"""Isophote analysis of each lens light and the sample summary (SPEC §9)."""
+"""Isophote analysis of each lens's fitted lens light and the sample summary (SPEC §9)."""
 
 
 rule isophotes:
     input:
-        image=lens_light_image,
+        unpack(isophote_inputs),
     output:
+        image="results/{lens}/lens_light.fits",
         table="results/{lens}/isophotes.csv",
         summary="results/{lens}/isophotes.json",
         figure=report(
@@ -26,9 +27,9 @@ rule isophotes:
     conda:
         "../envs/mgelens.yaml"
     shell:
-        "mgelens isophotes {input.image:q} "
-        "--lens {wildcards.lens} --summary {output.summary:q} --figure {output.figure:q} "
-        "--out {output.table:q} > {log:q} 2>&1"
+        "mgelens isophotes --phase results/{wildcards.lens}/mass --psf {input.psf:q} "
+        "--save-image {output.image:q} --lens {wildcards.lens} --summary {output.summary:q} "
+        "--figure {output.figure:q} --out {output.table:q} > {log:q} 2>&1"
 
 
 rule summary:

@@ -5,6 +5,7 @@ Every helper is a named function (no lambdas in rules). Relative paths in the co
 top-level Snakefile, so `snakemake -d <elsewhere>` finds them too.
 """
 
+import json
 import os
 import re
 from pathlib import Path
@@ -14,9 +15,15 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
 import mgelens
+from mgelens.pipeline.settings import SettingsError, settings_from_mapping
 
 
 validate(config, schema="../schemas/config.schema.yaml")
+try:  # stop before building the DAG if the slam: section is wrong, naming the key
+    settings_from_mapping(config["slam"], origin="config")
+except SettingsError as error:
+    raise WorkflowError(str(error)) from None
+SLAM_SETTINGS = json.dumps(config["slam"], sort_keys=True)
 
 REPO = Path(workflow.basedir)
 MGELENS_VERSION = mgelens.__version__
@@ -135,25 +142,26 @@ def preview_mem_mb(wildcards, attempt) -> int:
     return 1000 * attempt
 
 
-def lens_light_image(wildcards) -> str:
-    """PSF-convolved lens-light image whose isophotes are analysed.
-
-    Until the light phase has run, mocks are analysed on their true lens light.
-    """
-    return f"{imaging_folder(wildcards.lens)}/lens_light_blurred.fits"
+def isophote_inputs(wildcards) -> dict:
+    """The final (MASS) phase of a lens, whose lens light is analysed (SPEC §9), and its PSF."""
+    folder = f"results/{wildcards.lens}/mass"
+    return {
+        "result": f"{folder}/result.json",
+        "model": f"{folder}/model.fits",
+        "psf": imaging_files(wildcards)["psf"],
+    }
 
 
 def isophote_summaries(wildcards) -> list[str]:
-    """Per-lens isophote summaries gathered by the sample summary (mocks only for now)."""
-    return [f"results/{lens}/isophotes.json" for lens in LENSES.index[LENSES["kind"] == "mock"]]
+    """Per-lens isophote summaries gathered by the sample summary (every lens)."""
+    return [f"results/{lens}/isophotes.json" for lens in LENSES.index]
 
 
 def all_targets() -> list[str]:
-    """Default target: previews, isophotes per lens and the sample summary."""
+    """Default target: previews, and the sample summary, which needs every lens's SLaM
+    chain and isophotes."""
     targets = [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
-    if (LENSES["kind"] == "mock").any():
-        targets += ["results/summary/lenses.csv", "results/summary/histograms.png"]
-    return targets
+    return targets + ["results/summary/lenses.csv", "results/summary/histograms.png"]
 
 
 # SLaM phases (workflow/rules/slam.smk)
@@ -178,7 +186,7 @@ def phase_options(wildcards) -> str:
     row = LENSES.loc[wildcards.lens]
     return (
         f"--mask-radius {row['mask_radius']} --mge-sets {row['mge_sets']} "
-        f"--point-set {row['point_set']} --profile {config['slam']['profile']}"
+        f"--point-set {row['point_set']}"
     )
 
 

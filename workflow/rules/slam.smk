@@ -2,7 +2,9 @@
 
 A phase reads only earlier phases' folders, so deleting one result reruns just that phase
 (and those after it). Build a lens's chain with
-`snakemake -j2 results/M1/mass/result.json`.
+`snakemake -j2 results/M1/mass/result.json`. One thread per phase, so that `-j2` fits two
+lenses at a time; the config's whole `slam:` section goes to every phase (`--slam`), and
+changing it reruns the phases.
 """
 
 rule phase:
@@ -20,7 +22,8 @@ rule phase:
         mgelens_version=MGELENS_VERSION,
         lens_dir=lens_imaging_folder,
         options=phase_options,
-    threads: 2
+        slam=SLAM_SETTINGS,
+    threads: 1
     resources:
         mem_mb=phase_mem_mb,
         runtime=600,
@@ -30,4 +33,5 @@ rule phase:
     shell:
         "mgelens phase {wildcards.phase} --lens-dir {params.lens_dir:q} "
         "--results results/{wildcards.lens} --threads {threads} {params.options} "
+        "--slam {params.slam:q} "
         "> {log:q} 2>&1"

@@ -9,6 +9,15 @@ Example::
 The image is taken as it is (e.g. the PSF-convolved lens-light model); ``--psf`` convolves
 it first (for an unconvolved model image). Coordinates follow SPEC §1.1: (x, y) arcsec with
 (0, 0) at the image centre, row index increasing with +y.
+
+With ``--phase`` instead of an image, the lens light is the maximum-likelihood MGE of a
+SLaM phase folder (SPEC §9: the final L/M-phase model), rendered on a ±3.5″ grid at the
+``--pixel-scale`` (default 0.05″) with the fits' over-sampling and convolved with
+``--psf`` (required); the centre is the MGE centre, and the phase's mass model (q, φ with
+3σ intervals, critical curve, Einstein radius, SPEC §9.3) joins the summary and figure::
+
+    mgelens isophotes --phase results/M1/mass --psf results/M1/mock/psf.fits \
+        --save-image results/M1/lens_light.fits --out results/M1/isophotes.csv
 """
 
 import argparse
@@ -16,8 +25,9 @@ import logging
 from pathlib import Path
 
 import numpy as np
+from astropy.io import fits
 
-from mgelens.atomic import atomic_path, write_json
+from mgelens.atomic import atomic_path, write_fits, write_json
 from mgelens.convolve import convolve_image
 from mgelens.imaging import PIXSCALE_KEY, ImagingError, read_fits_image
 from mgelens.isophotes import (
@@ -25,10 +35,17 @@ from mgelens.isophotes import (
     brightest_pixel_centre,
     isophote_statistics,
     isophote_table,
+    mass_shape_from,
+    render_light,
 )
+from mgelens.pipeline.phases import MODEL_FILE, PhaseInputError, lens_light_model, mass_model
 from mgelens.plot import save_png
 from mgelens.plot.isophotes import isophote_figure
+from mgelens.search.results import PhaseResult
 from mgelens.summary import lens_summary
+
+DEFAULT_PIXEL_SCALE = 0.05
+"""Arcsec per pixel of the rendered phase lens light (SPEC §9: Δ = 0.05″)."""
 
 logger = logging.getLogger(__name__)
 
@@ -40,11 +57,15 @@ def register(subparsers) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("image", type=Path, help="FITS image of the lens light")
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("image", type=Path, nargs="?", help="FITS image of the lens light")
+    source.add_argument(
+        "--phase", type=Path, help="SLaM phase folder whose MGE lens light is analysed"
+    )
     parser.add_argument(
         "--pixel-scale",
         type=float,
-        help="arcsec per pixel (default: the PIXSCALE keyword of the image header)",
+        help="arcsec per pixel (default: the image's PIXSCALE keyword; 0.05 with --phase)",
     )
     parser.add_argument(
         "--centre",
@@ -54,6 +75,9 @@ def register(subparsers) -> None:
         help="galaxy centre in arcsec (default: the brightest pixel)",
     )
     parser.add_argument("--psf", type=Path, help="FITS PSF to convolve the image with first")
+    parser.add_argument(
+        "--save-image", type=Path, help="with --phase: write the rendered lens light (FITS)"
+    )
     parser.add_argument("--lens", help="lens name for the summary (default: the image file stem)")
     parser.add_argument("--summary", type=Path, help="write the per-lens summary JSON here")
     parser.add_argument("--figure", type=Path, help="write the isophote figure (PNG) here")
@@ -79,41 +103,79 @@ def format_statistics(lens: str, statistics: IsophoteStatistics) -> str:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        image, header = read_fits_image(args.image)
-        image = np.asarray(image, dtype=float)
-        if args.pixel_scale is None:
-            if PIXSCALE_KEY not in header:
-                raise ValueError(
-                    f"{args.image}: no {PIXSCALE_KEY} keyword in the header; pass --pixel-scale"
-                )
-            args.pixel_scale = float(header[PIXSCALE_KEY])
-        if args.psf is not None:
-            psf, _ = read_fits_image(args.psf)
-            image = convolve_image(image, np.asarray(psf, dtype=float) / np.sum(psf))
-    except (ImagingError, ValueError) as exc:
+        if args.phase is not None:
+            image, centre, mass = _phase_light(args)
+            source = args.phase
+        else:
+            image, centre, mass = _image_light(args), args.centre, None
+            source = args.image
+    except (ImagingError, ValueError, PhaseInputError) as exc:
         logger.error("%s", exc)
         return 1
-    centre = (
-        tuple(args.centre)
-        if args.centre is not None
-        else brightest_pixel_centre(image, args.pixel_scale)
-    )
-    lens = args.lens or args.image.stem
-    table = isophote_table(image, args.pixel_scale, centre=centre)
+    if centre is None:
+        centre = brightest_pixel_centre(image, args.pixel_scale)
+    lens = args.lens or (args.phase.parent.name if args.phase else args.image.stem)
+    table = isophote_table(image, args.pixel_scale, centre=tuple(centre))
     statistics = isophote_statistics(table)
     with atomic_path(args.out) as temporary:
         table.to_csv(temporary, index=False)
     print(format_statistics(lens, statistics))
     if args.summary is not None:
         inputs = {
-            "image": args.image,
+            "image" if args.phase is None else "phase": source,
             "psf": args.psf,
             "pixel_scale": args.pixel_scale,
             "centre": list(centre),
             "table": args.out,
         }
-        write_json(args.summary, lens_summary(lens, statistics, inputs=inputs))
+        write_json(args.summary, lens_summary(lens, statistics, mass, inputs=inputs))
     if args.figure is not None:
-        figure = isophote_figure(image, args.pixel_scale, table, centre=centre, title=lens)
+        figure = isophote_figure(
+            image, args.pixel_scale, table, mass=mass, centre=tuple(centre), title=lens
+        )
         save_png(figure, args.figure)
     return 0
+
+
+def _image_light(args: argparse.Namespace) -> np.ndarray:
+    """The lens-light image of ``args.image`` (convolved with ``--psf`` if given)."""
+    image, header = read_fits_image(args.image)
+    image = np.asarray(image, dtype=float)
+    if args.pixel_scale is None:
+        if PIXSCALE_KEY not in header:
+            raise ValueError(
+                f"{args.image}: no {PIXSCALE_KEY} keyword in the header; pass --pixel-scale"
+            )
+        args.pixel_scale = float(header[PIXSCALE_KEY])
+    if args.psf is not None:
+        image = convolve_image(image, _read_psf(args.psf))
+    return image
+
+
+def _phase_light(args: argparse.Namespace):
+    """(image, centre, MassShape) of the MGE lens light of the phase folder ``args.phase``."""
+    if args.psf is None:
+        raise ValueError("--phase needs --psf: the PSF of the lens's imaging (psf.fits)")
+    args.pixel_scale = args.pixel_scale or DEFAULT_PIXEL_SCALE
+    sets, intensities = lens_light_model(args.phase)
+    centre = sets[0].centre
+    profiles = [g for mge, i in zip(sets, intensities, strict=True) for g in mge.gaussians(i)]
+    image = render_light(profiles, args.pixel_scale, psf=_read_psf(args.psf), centre=centre)
+    if args.save_image is not None:
+        unit = fits.getheader(args.phase / MODEL_FILE, extname="LENS").get("BUNIT", "")
+        header = fits.Header({PIXSCALE_KEY: args.pixel_scale, "BUNIT": unit})
+        header["PHASE"] = str(args.phase)[-68:]
+        write_fits(args.save_image, fits.PrimaryHDU(image.astype(np.float32), header))
+    interval = PhaseResult.read(args.phase).interval(3)
+    mass = mass_shape_from(
+        mass_model(args.phase),
+        axis_ratio_interval=interval.get("mass.axis_ratio"),
+        angle_interval=interval.get("mass.angle"),
+    )
+    return image, centre, mass
+
+
+def _read_psf(path: Path) -> np.ndarray:
+    psf, _ = read_fits_image(path)
+    psf = np.asarray(psf, dtype=float)
+    return psf / np.sum(psf)

@@ -10,11 +10,13 @@ Example::
 The phase reads the imaging of ``--lens-dir`` and the earlier phases' folders under
 ``--results``, and writes ``<results>/<phase>/`` (result.json, samples.csv, model.fits,
 phase.log; spix1 also adapt_image.fits). Settings: the ``--profile`` defaults ("quick"
-unless the config's ``slam: profile:`` says otherwise), then the ``slam:`` section of
-``--config``, then the per-lens options ``--mask-radius``, ``--mge-sets``, ``--point-set``.
+unless the ``slam:`` settings say otherwise), then the ``slam:`` section of ``--config``,
+then ``--slam`` (the same content as JSON; the workflow passes its config's section this
+way), then the per-lens options ``--mask-radius``, ``--mge-sets``, ``--point-set``.
 """
 
 import argparse
+import json
 import logging
 from pathlib import Path
 
@@ -46,6 +48,13 @@ def register(subparsers) -> None:
         help="results folder of the lens (one sub-folder per phase)",
     )
     parser.add_argument("--config", type=Path, help="YAML file with a `slam:` settings section")
+    parser.add_argument(
+        "--slam",
+        type=_json_mapping,
+        default={},
+        metavar="JSON",
+        help='a `slam:` section as JSON, e.g. \'{"samplers": {"mass": {"n_live": 80}}}\'',
+    )
     parser.add_argument("--profile", choices=sorted(PROFILES), help="speed profile (default quick)")
     parser.add_argument("--threads", type=int, default=1, help="numba/BLAS threads (default 1)")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
@@ -62,7 +71,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         phases.limit_threads(args.threads)
-        settings = load_settings(args.config, args.profile).with_overrides(
+        settings = load_settings(args.config, args.profile, args.slam).with_overrides(
             mask_radius=args.mask_radius,
             mge_sets=args.mge_sets,
             point_set=None if args.point_set is None else args.point_set == "yes",
@@ -72,3 +81,14 @@ def run(args: argparse.Namespace) -> int:
         logger.error("phase %s: %s", args.phase, error)
         return 1
     return 0
+
+
+def _json_mapping(text: str) -> dict:
+    """argparse type: a JSON object."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"--slam is not valid JSON: {error}") from error
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError("--slam must be a JSON object")
+    return value

@@ -254,21 +254,38 @@ def settings_from_mapping(
         raise SettingsError(f"{origin}: {error}") from error
 
 
-def load_settings(path: str | Path | None = None, profile: str | None = None) -> SlamSettings:
-    """Settings of ``profile`` overridden by the ``slam:`` section of the YAML file ``path``.
+def load_settings(
+    path: str | Path | None = None,
+    profile: str | None = None,
+    overrides: Mapping | None = None,
+) -> SlamSettings:
+    """Settings of ``profile`` overridden by the ``slam:`` section of the YAML file ``path``,
+    then by the mapping ``overrides`` (same content as a ``slam:`` section).
 
-    Without a file (or without a ``slam:`` section) the profile's defaults are returned.
+    Without a file (or without a ``slam:`` section) and overrides the profile's defaults are
+    returned. A profile named by ``profile`` wins over one named in the file or overrides.
     """
-    if path is None:
-        return profile_settings(profile or DEFAULT_PROFILE)
-    path = Path(path)
-    try:
-        document = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as error:
-        raise SettingsError(f"{path}: cannot read the settings file: {error}") from error
-    if not isinstance(document, Mapping):
-        raise SettingsError(f"{path}: expected a YAML mapping at the top level")
-    section = document.get("slam") or {}
-    if not isinstance(section, Mapping):
-        raise SettingsError(f"{path}: `slam:` must be a mapping of settings")
-    return settings_from_mapping(section, profile, origin=str(path))
+    section: dict = {}
+    origin = "settings"
+    if path is not None:
+        path = Path(path)
+        origin = str(path)
+        try:
+            document = yaml.safe_load(path.read_text()) or {}
+        except (OSError, yaml.YAMLError) as error:
+            raise SettingsError(f"{path}: cannot read the settings file: {error}") from error
+        if not isinstance(document, Mapping):
+            raise SettingsError(f"{path}: expected a YAML mapping at the top level")
+        section = document.get("slam") or {}
+        if not isinstance(section, Mapping):
+            raise SettingsError(f"{path}: `slam:` must be a mapping of settings")
+        section = dict(section)
+    if overrides:
+        origin = "--slam" if path is None else f"{origin} and --slam"
+        samplers = dict(section.get("samplers") or {})
+        for phase, values in (overrides.get("samplers") or {}).items():
+            samplers[phase] = {**(samplers.get(phase) or {}), **(values or {})}
+        section = {**section, **overrides}
+        if samplers:
+            section["samplers"] = samplers
+    return settings_from_mapping(section, profile, origin=origin)

@@ -38,6 +38,7 @@ import logging
 import math
 import multiprocessing
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -84,6 +85,10 @@ class SamplerSettings:
         Target acceptance fraction of rwalk.
     n_effective : int or None
         Dynamic sampler: target effective sample size (dynesty default if ``None``).
+    max_iterations : int or None
+        dynesty only: stop after this many iterations even if ``dlogz`` is not reached
+        (dynesty ``maxiter``; a warning is logged). For smoke tests and hard time limits;
+        the posterior of a capped run is not converged.
     enlarge_per_dim, split_threshold, n_networks, n_batch, f_live, n_shell, n_eff, \
 discard_exploration
         Nautilus settings (SPEC §8.3).
@@ -109,6 +114,7 @@ discard_exploration
     slices: int = 5
     facc: float = 0.2
     n_effective: int | None = None
+    max_iterations: int | None = None
     enlarge_per_dim: float = 1.1
     split_threshold: float = 100.0
     n_networks: int = 4
@@ -129,6 +135,11 @@ discard_exploration
             raise ValueError(f"n_live must be at least 2, got {self.n_live}")
         if self.n_processes < 1:
             raise ValueError(f"n_processes must be at least 1, got {self.n_processes}")
+        if self.max_iterations is not None:
+            if self.method == "nautilus":
+                raise ValueError("max_iterations applies to the dynesty samplers only")
+            if self.max_iterations < 1:
+                raise ValueError(f"max_iterations must be >= 1, got {self.max_iterations}")
         if self.checkpoint_every < 0 or self.progress_every < 0:
             raise ValueError("checkpoint_every and progress_every must be >= 0 seconds")
 
@@ -485,7 +496,14 @@ def _run_dynesty(sampler, settings: SamplerSettings, progress, checkpoint: str |
         "checkpoint_file": checkpoint,
         "checkpoint_every": settings.checkpoint_every,
         "resume": resume,
+        "maxiter": settings.max_iterations,
     }
+    with warnings.catch_warnings():  # mgelens logs its own warning for max_iterations
+        warnings.filterwarnings("ignore", "The sampling was stopped short", UserWarning)
+        _run_dynesty_quietly(sampler, settings, common)
+
+
+def _run_dynesty_quietly(sampler, settings: SamplerSettings, common: dict) -> None:
     if settings.method == "dynesty_dynamic":
         sampler.run_nested(
             nlive_init=settings.n_live,
@@ -541,6 +559,11 @@ def _sample_dynesty(
             progress = _ProgressLine(log, settings.progress_every, state, settings.method)
             checkpoint = None if checkpoint_path is None else str(checkpoint_path)
             _run_dynesty(sampler, settings, progress, checkpoint, resume)
+            if settings.max_iterations and sampler.results.niter >= settings.max_iterations:
+                log(
+                    f"{settings.method}: WARNING stopped at max_iterations = "
+                    f"{settings.max_iterations} before dlogz was reached: not converged"
+                )
             final = state.snapshot(finished=True)
             if checkpoint_path is not None:
                 setattr(sampler, _STATE_ATTRIBUTE, final)
