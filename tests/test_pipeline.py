@@ -303,7 +303,7 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
     only = load_settings(None, None, {"profile": "paper", "source_pixels": 900})
     assert only.profile == "paper"
     assert only.source_pixels == 900
-    with pytest.raises(SettingsError, match="--slam: unknown key slam.pixels"):
+    with pytest.raises(SettingsError, match=r"--slam: unknown key slam\.pixels"):
         load_settings(None, None, {"pixels": 3})
 
 
@@ -504,8 +504,7 @@ def test_isophotes_of_a_phase_render_its_lens_light(sp_run, mock_dir, tmp_path):
     """``mgelens isophotes --phase`` renders the phase's MGE lens light, PSF-convolved, on a
     ±3.5″ grid: inside the mask it equals the fit's own lens-light image in model.fits;
     the summary carries the phase's mass."""
-    results, result = sp_run
-    folder = results / "sp"
+    folder = sp_run[0] / "sp"
     image_path, summary_path = tmp_path / "lens_light.fits", tmp_path / "isophotes.json"
     arguments = ["isophotes", "--phase", str(folder), "--psf", str(mock_dir / "psf.fits")]
     arguments += ["--pixel-scale", str(PIXEL), "--save-image", str(image_path)]
