@@ -2,10 +2,12 @@
 
 import numpy as np
 import pytest
+from sklearn.cluster import KMeans
 
 from mgelens.grid import pixel_centres, sub_grid
 from mgelens.source.border import border_sub_pixels, edge_pixels, relocate_to_border
 from mgelens.source.image_mesh import (
+    _kmeans_plusplus,
     floored_adapt_image,
     kmeans_centres,
     kmeans_weights,
@@ -56,6 +58,36 @@ def test_kmeans_is_deterministic_and_follows_the_weights():
     assert near.mean() > 0.6
     with pytest.raises(ValueError, match="only"):
         kmeans_centres(x[:10], y[:10], weights[:10], 20)
+
+
+def weighted_inertia(x, y, weights, cx, cy):
+    distance = (x[:, None] - cx) ** 2 + (y[:, None] - cy) ** 2
+    return float(np.sum(weights * distance.min(axis=1)))
+
+
+def test_compiled_kmeans_plusplus_matches_scikit_learn_quality():
+    """The numba seeding is scikit-learn's algorithm with another random stream: after the
+    same 5 Lloyd iterations the weighted inertia matches scikit-learn's on average, and
+    the seeds are distinct data points."""
+    x, y = pixel_centres((61, 61), 0.05)
+    used = np.hypot(x, y) < 1.4
+    x, y = x[used], y[used]
+    bright = np.exp(-((np.hypot(x, y) - 0.9) ** 2) / (2 * 0.15**2)) + 0.02
+    weights = kmeans_weights(bright, weight_floor=0.1, weight_power=2.0)
+    ours, reference = [], []
+    for seed in range(6):
+        ours.append(weighted_inertia(x, y, weights, *kmeans_centres(x, y, weights, 150, seed)))
+        kmeans = KMeans(n_clusters=150, random_state=seed, n_init=1, max_iter=5)
+        centres = kmeans.fit(np.column_stack([x, y]), sample_weight=weights).cluster_centers_
+        reference.append(weighted_inertia(x, y, weights, centres[:, 0], centres[:, 1]))
+    # (a weighted random start instead of k-means++ is 4.7 % worse; seed scatter 0.4 %)
+    assert np.mean(ours) == pytest.approx(np.mean(reference), rel=0.015)
+    points = np.column_stack([x, y])
+    trials = 2 + int(np.log(150))
+    uniforms = np.random.default_rng(0).random(1 + 149 * trials)
+    seeds = _kmeans_plusplus(points, weights, 150, trials, uniforms)
+    assert len(np.unique(seeds, axis=0)) == 150
+    assert all((points == seed).all(axis=1).any() for seed in seeds)
 
 
 def test_edge_pixels_and_border_sub_pixels():

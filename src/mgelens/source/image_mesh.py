@@ -11,6 +11,7 @@ with the current mass model at every likelihood evaluation:
 import numpy as np
 from sklearn.cluster import KMeans
 
+from mgelens._jit import njit
 from mgelens.grid import pixel_centres
 
 ADAPT_MINIMUM_FRACTION = 0.01
@@ -90,6 +91,12 @@ def kmeans_centres(
 
     Deliberately not converged (anchor: ``n_init=1, max_iter=5``): what matters is that
     fixed inputs and a fixed ``seed`` give the identical mesh throughout a search.
+
+    The k-means++ seeding is scikit-learn's weighted greedy variant (first centre drawn
+    ∝ weight, each next one the best of 2 + ln k candidates drawn ∝ weight × squared
+    distance) compiled with numba, then scikit-learn runs the Lloyd iterations from it.
+    scikit-learn's own seeding loops in Python over the k centres (0.14 s for 500 pixels,
+    more than the rest of an SPix2 likelihood); only the random stream differs.
     """
     if n_pixels > x.size:
         raise ValueError(
@@ -98,7 +105,49 @@ def kmeans_centres(
     weights = np.asarray(weights, dtype=float)
     if not np.all(np.isfinite(weights)) or np.any(weights < 0) or not weights.sum() > 0:
         raise ValueError("k-means weights must be finite, non-negative and not all zero")
-    kmeans = KMeans(n_clusters=n_pixels, random_state=seed, n_init=1, max_iter=max_iter)
-    kmeans.fit(np.column_stack([x, y]), sample_weight=weights)
+    points = np.column_stack([x, y]).astype(float)
+    trials = 2 + int(np.log(n_pixels))
+    uniforms = np.random.default_rng(seed).random(1 + (n_pixels - 1) * trials)
+    initial = _kmeans_plusplus(points, weights, n_pixels, trials, uniforms)
+    kmeans = KMeans(n_clusters=n_pixels, init=initial, n_init=1, max_iter=max_iter)
+    kmeans.fit(points, sample_weight=weights)
     centres = kmeans.cluster_centers_
     return centres[:, 0].copy(), centres[:, 1].copy()
+
+
+@njit
+def _kmeans_plusplus(points, weights, k, trials, uniforms):
+    """Greedy weighted k-means++ seeding (scikit-learn's algorithm): (k, 2) centres.
+
+    ``uniforms`` holds the 1 + (k − 1)·trials uniform draws in [0, 1) it consumes.
+    """
+    n = points.shape[0]
+    centres = np.empty((k, 2))
+    cumulative = np.cumsum(weights)
+    first = min(np.searchsorted(cumulative, uniforms[0] * cumulative[-1]), n - 1)
+    draw = 1
+    centres[0] = points[first]
+    closest = np.empty(n)
+    for i in range(n):
+        closest[i] = (points[i, 0] - centres[0, 0]) ** 2 + (points[i, 1] - centres[0, 1]) ** 2
+    candidate_distance = np.empty(n)
+    best_distance = np.empty(n)
+    for c in range(1, k):
+        cumulative = np.cumsum(weights * closest)
+        best_potential = np.inf
+        best = 0
+        for _ in range(trials):
+            pick = min(np.searchsorted(cumulative, uniforms[draw] * cumulative[-1]), n - 1)
+            draw += 1
+            potential = 0.0
+            for i in range(n):
+                d = (points[i, 0] - points[pick, 0]) ** 2 + (points[i, 1] - points[pick, 1]) ** 2
+                candidate_distance[i] = min(closest[i], d)
+                potential += weights[i] * candidate_distance[i]
+            if potential < best_potential:
+                best_potential = potential
+                best = pick
+                best_distance[:] = candidate_distance
+        centres[c] = points[best]
+        closest[:] = best_distance
+    return centres
