@@ -117,6 +117,33 @@ def test_pixelized_noiseless_fit_recovers_lens_light_and_source():
     assert np.allclose(split[~dataset.mask], result.model_image)
 
 
+def test_repeated_mass_and_source_reuse_the_source_system():
+    """LIGHT-phase pattern: mass and source object fixed, lens light changing. From the
+    second fit on, the source's part of the system is reused; every figure matches a fit
+    on a fresh dataset (which builds the whole system)."""
+    rng = np.random.default_rng(4)
+    blank = make_dataset()
+    data = np.zeros(SHAPE)
+    data[~blank.mask] = rng.normal(0.05, NOISE, blank.data.size)
+    dataset = make_dataset(data)
+    source = pixelized_source(dataset, ConstantSplit(0.5))
+    first, second = lens_sets()
+    models = [
+        LensModel(mass=MASS, lens_light=sets, source=source)
+        for sets in ((first,), (second,), (first, second))
+    ]
+    for model in models + models[::-1]:
+        reused = fit(dataset, model)
+        fresh = fit(make_dataset(data), model)
+        assert reused.log_evidence == pytest.approx(fresh.log_evidence, rel=1e-10)
+        np.testing.assert_allclose(reused.solution.x, fresh.solution.x, rtol=1e-6, atol=1e-9)
+    assert dataset._source_cache["system"] is not None
+    # another mass model (equal by value is enough) or source object starts afresh
+    moved = (SIE((0.02, -0.03), 1.12, 0.8, 40.0), MASS[1])
+    fit(dataset, LensModel(mass=moved, lens_light=(first,), source=source))
+    assert dataset._source_cache.get("system") is None
+
+
 def test_parametric_source_joins_the_linear_system():
     blank = make_dataset(settings=FitSettings(lp_sub_size_centre=8, mge_diagonal=0.0))
     sets = lens_sets()[:1]

@@ -94,6 +94,7 @@ class FitDataset:
     source_grid: SubGrid
     border: np.ndarray
     _columns_cache: dict = field(default_factory=dict, repr=False)
+    _source_cache: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def from_imaging(
@@ -180,6 +181,22 @@ class FitDataset:
                 self._columns_cache.pop(next(iter(self._columns_cache)))
             self._columns_cache[key] = self.light_grid.blurred_columns(list(sets))
         return self._columns_cache[key]
+
+    def repeated_source(self, mass, source: "PixelizedSource") -> "SourceSystem | None":
+        """The source's fixed part of the linear system if the previous fit had the same
+        mass model and the same source object, else ``None`` (then remembered as previous).
+
+        Phases that keep mass and source fixed (LIGHT) then pay for tracing, mesh,
+        interpolation, F_SS and ln det H once; other phases pay nothing extra.
+        """
+        cache = self._source_cache
+        if cache.get("source") is source and cache.get("mass") == mass:
+            if cache.get("system") is None:
+                cache["system"] = SourceSystem.build(self, mass, source)
+            return cache["system"]
+        cache.clear()
+        cache.update(source=source, mass=mass)
+        return None
 
 
 @dataclass(frozen=True)
@@ -357,6 +374,37 @@ class SourceOperator:
         return self.psf_operator @ (self.mapping @ fluxes)
 
 
+@dataclass(frozen=True, eq=False)
+class SourceSystem:
+    """The parts of the linear system that depend on mass and source only: the operator,
+    F_SS + H (dense), ln det H and the blurred mapping G (for F_LS = Gᵀ W L)."""
+
+    operator: SourceOperator
+    curvature_regularization: np.ndarray
+    log_det_regularization: float
+
+    @classmethod
+    def build(cls, dataset: FitDataset, mass, source: "PixelizedSource") -> "SourceSystem":
+        operator = pixelized_operator(dataset, mass, source)
+        h = operator.regularization_matrix
+        none = np.zeros((dataset.data.size, 0))
+        f_ss = curvature_matrix(none, operator.mapping, dataset.tile_plan, dataset.inverse_variance)
+        f_ss += h.toarray()
+        return cls(operator, f_ss, log_det_regularization(h))
+
+    def curvature(self, dense: np.ndarray, inverse_variance: np.ndarray) -> np.ndarray:
+        """The full [dense | source] matrix F + H for new ``dense`` columns."""
+        n_dense = dense.shape[1]
+        weighted = inverse_variance[:, None] * dense
+        q = np.empty((n_dense + self.curvature_regularization.shape[0],) * 2)
+        q[:n_dense, :n_dense] = dense.T @ weighted
+        f_ls = (self.operator.blurred_mapping.T @ weighted).T
+        q[:n_dense, n_dense:] = f_ls
+        q[n_dense:, :n_dense] = f_ls.T
+        q[n_dense:, n_dense:] = self.curvature_regularization
+        return q
+
+
 def pixelized_operator(dataset: FitDataset, mass, source: PixelizedSource) -> SourceOperator:
     """Trace, mesh, interpolate, blur and regularize a pixelized source (SPEC §4–5)."""
     bx, by, mx, my = _traced_source_positions(dataset, mass, source)
@@ -406,9 +454,12 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
     )
     dense = np.hstack([lens_columns, source_columns])
     n_dense = dense.shape[1]
-    operator = mapping = None
+    operator = mapping = system = None
     if isinstance(source, PixelizedSource):
-        operator = pixelized_operator(dataset, model.mass, source)
+        system = dataset.repeated_source(model.mass, source)
+        operator = (
+            pixelized_operator(dataset, model.mass, source) if system is None else system.operator
+        )
         mapping, h = operator.mapping, operator.regularization_matrix
     if n_dense == 0 and operator is None:
         raise ValueError("the model has no linear light: give it lens light or a source")
@@ -417,11 +468,15 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
     d = data_vector(
         dense, mapping, dataset.source_psf_operator, dataset.inverse_variance, residual_data
     )
-    q = curvature_matrix(dense, mapping, dataset.tile_plan, dataset.inverse_variance)
+    if system is None:
+        q = curvature_matrix(dense, mapping, dataset.tile_plan, dataset.inverse_variance)
+        if operator is not None:
+            q[n_dense:, n_dense:] += h.toarray()
+    else:
+        q = system.curvature(dense, dataset.inverse_variance)
     q[np.arange(n_dense), np.arange(n_dense)] += settings.mge_diagonal
     fixed_zero = None
     if operator is not None:
-        q[n_dense:, n_dense:] += h.toarray()
         if settings.positive_only and settings.force_edge_pixels_to_zero:
             fixed_zero = np.concatenate([np.zeros(n_dense, dtype=bool), operator.mesh.edge_pixels])
     solution = solve_linear_system(
@@ -459,7 +514,7 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
     fluxes = x[n_dense:]
     regularization_term = float(fluxes @ (h @ fluxes))
     log_det_fh = solution.log_det_source
-    log_det_h = log_det_regularization(h)
+    log_det_h = log_det_regularization(h) if system is None else system.log_det_regularization
     return FitResult(
         **common,
         log_evidence=log_evidence(
