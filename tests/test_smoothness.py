@@ -8,6 +8,12 @@ A "jump" is the change between adjacent steps minus the local trend (the running
 of the changes over ±5 steps): the evidence itself slopes by several units per step away
 from its peak. Edge pixels are not forced to zero here: that anchor rule (SPEC §6.3) makes
 the evidence jump whenever a source pixel joins or leaves the convex hull of the mesh.
+
+The largest jump depends on the mesh: over k-means seeds 1–7 the natural-neighbour + cross
+scheme had 95th-percentile jumps of 0.25–0.57 but maxima of 0.6–4.7 (rare steps remain
+where traced sub-pixels leave the mesh hull and fall back to the nearest point, SPEC
+§4.4), against 95th percentiles of 7.5–8.9 and maxima of 12–23 for nearest-cell +
+neighbour. The test therefore scans three meshes.
 """
 
 import numpy as np
@@ -26,26 +32,35 @@ STEP = 0.0004
 N_STEPS = 200
 N_SOURCE_PIXELS = 500
 TREND_HALF_WIDTH = 5
+MESH_SEEDS = (1, 2, 3)
+
+
+@pytest.fixture(scope="module", params=MESH_SEEDS)
+def m1_setup(request, m1_dataset):
+    dataset, lens, adapt = m1_dataset
+    x, y = pixel_centres(dataset.mask.shape, dataset.imaging.pixel_scale)
+    weights = kmeans_weights(adapt, weight_floor=0.2, weight_power=1.0)
+    used = ~dataset.mask
+    mesh_x, mesh_y = kmeans_centres(x[used], y[used], weights, N_SOURCE_PIXELS, request.param)
+    centre = tuple(lens.mass[0].centre)
+    pixel_scale = dataset.imaging.pixel_scale
+    light = (
+        MGESet.extended(centre, (0.05, 0.03), pixel_scale, lens.mask_radius),
+        MGESet.extended(centre, (-0.1, 0.1), pixel_scale, lens.mask_radius),
+    )
+    return dataset, lens.mass[0], light, mesh_x, mesh_y
 
 
 @pytest.fixture(scope="module")
-def m1_setup():
+def m1_dataset():
     lens = paper_mock("M1")
     mock = simulate(lens)
     imaging = mock.imaging
     mask = circular(imaging.shape, imaging.pixel_scale, lens.mask_radius)
-    centre = tuple(lens.mass[0].centre)
     settings = FitSettings(force_edge_pixels_to_zero=False)
+    centre = tuple(lens.mass[0].centre)
     dataset = FitDataset.from_imaging(imaging, mask, settings, light_centre=centre)
-    adapt = mock.lensed_source_blurred[~mask]
-    x, y = pixel_centres(imaging.shape, imaging.pixel_scale)
-    weights = kmeans_weights(adapt, weight_floor=0.2, weight_power=1.0)
-    mesh_x, mesh_y = kmeans_centres(x[~mask], y[~mask], weights, N_SOURCE_PIXELS, seed=1)
-    light = (
-        MGESet.extended(centre, (0.05, 0.03), imaging.pixel_scale, lens.mask_radius),
-        MGESet.extended(centre, (-0.1, 0.1), imaging.pixel_scale, lens.mask_radius),
-    )
-    return dataset, lens.mass[0], light, mesh_x, mesh_y
+    return dataset, lens, mock.lensed_source_blurred[~mask]
 
 
 def evidence_scan(m1_setup, interpolation, regularization):
@@ -79,6 +94,7 @@ def test_natural_neighbour_cross_scheme_is_smooth_and_nearest_cell_is_not(m1_set
     rough = evidence_scan(m1_setup, "nearest", Constant(1.0))
     smooth_jumps, rough_jumps = jumps(smooth), jumps(rough)
     assert np.percentile(smooth_jumps, 95) < 0.6
-    assert smooth_jumps.max() < 1.5
     assert np.percentile(rough_jumps, 95) > 3.0
-    assert rough_jumps.max() > 5.0
+    assert smooth_jumps.max() < 5.0
+    assert rough_jumps.max() > 10.0
+    assert smooth_jumps.max() < 0.5 * rough_jumps.max()
