@@ -52,6 +52,7 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     # the default target is the whole DAG: five phases and isophotes per lens, summary
     assert counts["phase"] == 15
     assert counts["isophotes"] == 3
+    assert counts["recovery"] == 3
     assert counts["summary"] == 1
     assert counts["all"] == 1
     assert not list(tmp_path.iterdir()) or {p.name for p in tmp_path.iterdir()} <= {".snakemake"}
@@ -301,6 +302,13 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     table = pd.read_csv(tmp_path / "results" / "summary" / "lenses.csv")
     assert list(table["lens"]) == ["M1"]
     assert (tmp_path / "results" / "summary" / "histograms.png").stat().st_size > 10_000
+    recovery = json.loads((lens / "recovery.json").read_text())
+    assert {row["name"] for row in recovery["mass"]} >= {"mass.einstein_radius", "mass.slope"}
+    assert set(recovery["criteria"]) == {
+        "einstein_radius_within_2_percent",
+        "epl_within_3sigma",
+        "lens_light_within_5_percent",
+    }
 
     (lens / "mass" / "result.json").unlink()
     target = "results/M1/mass/result.json"
@@ -310,4 +318,4 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert "mgelens phase mass " in rerun.stdout + rerun.stderr
     after = snakemake("-n", f"--configfile={config}", workdir=tmp_path)
     counts = job_counts(after.stdout + after.stderr)
-    assert counts == {"isophotes": 1, "summary": 1, "all": 1, "total": 3}
+    assert counts == {"isophotes": 1, "recovery": 1, "summary": 1, "all": 1, "total": 4}

@@ -57,3 +57,30 @@ rule summary:
     shell:
         "mgelens summary {input:q} --out-table {output.table:q} "
         "--out-figure {output.figure:q} > {log:q} 2>&1"
+
+
+rule recovery:
+    input:
+        truth="results/{lens}/mock/truth.json",
+        lens_light="results/{lens}/mock/lens_light_blurred.fits",
+        result="results/{lens}/mass/result.json",
+        model="results/{lens}/mass/model.fits",
+    output:
+        "results/{lens}/recovery.json",
+    wildcard_constraints:
+        lens=MOCK_LENSES,
+    log:
+        "logs/{lens}/recovery.log",
+    benchmark:
+        "results/{lens}/benchmarks/recovery.tsv"
+    params:
+        mgelens_version=MGELENS_VERSION,
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens recovery --lens-dir results/{wildcards.lens}/mock "
+        "--phase results/{wildcards.lens}/mass --out {output:q} > {log:q} 2>&1"

@@ -158,9 +158,11 @@ def isophote_summaries(wildcards) -> list[str]:
 
 
 def all_targets() -> list[str]:
-    """Default target: previews, and the sample summary, which needs every lens's SLaM
-    chain and isophotes."""
+    """Default target: previews, the sample summary (which needs every lens's SLaM chain
+    and isophotes) and, for mocks, the recovery of the truth."""
     targets = [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
+    mocks = LENSES.index[LENSES["kind"] == "mock"]
+    targets += [f"results/{lens}/recovery.json" for lens in mocks]
     return targets + ["results/summary/lenses.csv", "results/summary/histograms.png"]
 
 

@@ -1,0 +1,164 @@
+"""How well a phase recovered a mock's truth (SPEC §11 acceptance criteria).
+
+* **Mass**: every true EPL (and shear) parameter of ``truth.json`` against the phase's
+  posterior median and 3σ (99.73 %) credible interval; θ_E also as a relative error
+  (criterion: within 2 %).
+* **Lens light**: (model − true)/true of the PSF-convolved lens light inside the fit mask,
+  beyond 0.2″ of the lens centre (criterion: |·| < 5 % everywhere there).
+
+Angles are degrees counter-clockwise from +x and defined modulo 180°: a true angle is
+inside an interval if any of angle, angle ± 180° is. Mocks without external shear have
+true shear components of 0.
+"""
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from mgelens.grid import pixel_centres
+from mgelens.search.results import PhaseResult
+
+EINSTEIN_RADIUS_TOLERANCE = 0.02
+"""Relative θ_E error allowed (SPEC §11: θ_E within 2 %)."""
+LENS_LIGHT_TOLERANCE = 0.05
+"""Relative lens-light error allowed outside the centre (SPEC §11: 5 %)."""
+LENS_LIGHT_INNER_RADIUS = 0.2
+"""Arcsec around the lens centre left out of the lens-light comparison (SPEC §11)."""
+
+_EPL_NAMES = {
+    "einstein_radius": "mass.einstein_radius",
+    "axis_ratio": "mass.axis_ratio",
+    "angle": "mass.angle",
+    "slope": "mass.slope",
+}
+
+
+def true_mass_parameters(truth: Mapping) -> dict[str, float]:
+    """The true mass parameters of a mock's ``truth.json`` under the phases' names.
+
+    Raises
+    ------
+    ValueError
+        If the truth has no EPL profile.
+    """
+    values: dict[str, float] = {}
+    shear = {"shear.gamma_1": 0.0, "shear.gamma_2": 0.0}
+    for profile in truth["mass"]:
+        parameters = profile["parameters"]
+        if profile["type"] == "EPL":
+            values["mass.centre_x"], values["mass.centre_y"] = map(float, parameters["centre"])
+            values.update({name: float(parameters[key]) for key, name in _EPL_NAMES.items()})
+        elif profile["type"] == "ExternalShear":
+            shear["shear.gamma_1"] = float(parameters["gamma_1"])
+            shear["shear.gamma_2"] = float(parameters["gamma_2"])
+    if "mass.slope" not in values:
+        raise ValueError("the truth has no EPL mass profile to compare with")
+    return {**values, **shear}
+
+
+@dataclass(frozen=True)
+class ParameterRecovery:
+    """One true parameter against a posterior: median, 3σ interval and whether it holds."""
+
+    name: str
+    truth: float
+    median: float
+    lower_3sigma: float
+    upper_3sigma: float
+    within_3sigma: bool
+    error: float
+    """median − truth (angles: reduced to (−90°, 90°])."""
+
+
+def mass_recovery(truth: Mapping, phase: PhaseResult) -> list[ParameterRecovery]:
+    """Every true mass parameter the phase fitted, in the order of :func:`true_mass_parameters`."""
+    median, interval = phase.median, phase.interval(3)
+    rows = []
+    for name, value in true_mass_parameters(truth).items():
+        if name not in median:
+            continue
+        lower, upper = interval[name]
+        error = median[name] - value
+        candidates = [value]
+        if name.endswith(".angle"):
+            error = (error + 90.0) % 180.0 - 90.0
+            candidates = [value - 180.0, value, value + 180.0]
+        within = any(lower <= v <= upper for v in candidates)
+        rows.append(ParameterRecovery(name, value, median[name], lower, upper, within, error))
+    return rows
+
+
+@dataclass(frozen=True)
+class LensLightRecovery:
+    """Statistics of r = (model − true)/true over the compared pixels."""
+
+    n_pixels: int
+    mean: float
+    median: float
+    p95_abs: float
+    max_abs: float
+    fraction_within_tolerance: float
+    inner_radius: float
+
+
+def lens_light_recovery(
+    true_light: np.ndarray,
+    model_light: np.ndarray,
+    mask: np.ndarray,
+    pixel_scale: float,
+    centre: tuple[float, float],
+    inner_radius: float = LENS_LIGHT_INNER_RADIUS,
+) -> LensLightRecovery:
+    """Compare two native lens-light images (same shape, same units) inside ``mask``
+    (True = excluded) beyond ``inner_radius`` arcsec of ``centre``.
+
+    Raises
+    ------
+    ValueError
+        If the shapes differ or no pixel with positive true light is left to compare.
+    """
+    if true_light.shape != model_light.shape or mask.shape != true_light.shape:
+        raise ValueError(
+            f"lens-light images and mask differ in shape: {true_light.shape}, "
+            f"{model_light.shape}, {mask.shape}"
+        )
+    x, y = pixel_centres(true_light.shape, pixel_scale)
+    keep = ~mask & (np.hypot(x - centre[0], y - centre[1]) > inner_radius) & (true_light > 0)
+    if not keep.any():
+        raise ValueError("no pixel with positive true lens light to compare")
+    ratio = (model_light[keep] - true_light[keep]) / true_light[keep]
+    return LensLightRecovery(
+        n_pixels=int(keep.sum()),
+        mean=float(ratio.mean()),
+        median=float(np.median(ratio)),
+        p95_abs=float(np.percentile(np.abs(ratio), 95)),
+        max_abs=float(np.abs(ratio).max()),
+        fraction_within_tolerance=float(np.mean(np.abs(ratio) < LENS_LIGHT_TOLERANCE)),
+        inner_radius=inner_radius,
+    )
+
+
+def recovery_summary(
+    lens: str, mass: list[ParameterRecovery], light: LensLightRecovery | None
+) -> dict:
+    """JSON-ready record with the three SPEC §11 criteria as booleans."""
+    by_name = {row.name: row for row in mass}
+    theta_e = by_name.get("mass.einstein_radius")
+    theta_e_error = None if theta_e is None else theta_e.error / theta_e.truth
+    epl = [row for row in mass if row.name.startswith("mass.")]
+    return {
+        "lens": lens,
+        "mass": [asdict(row) for row in mass],
+        "einstein_radius_relative_error": theta_e_error,
+        "lens_light": None if light is None else asdict(light),
+        "criteria": {
+            "einstein_radius_within_2_percent": None
+            if theta_e_error is None
+            else bool(abs(theta_e_error) < EINSTEIN_RADIUS_TOLERANCE),
+            "epl_within_3sigma": bool(epl) and all(row.within_3sigma for row in epl),
+            "lens_light_within_5_percent": None
+            if light is None
+            else bool(light.max_abs < LENS_LIGHT_TOLERANCE),
+        },
+    }
