@@ -14,6 +14,7 @@ from mgelens.recovery import (
     lens_light_recovery,
     mass_recovery,
     recovery_summary,
+    recovery_table,
     true_mass_parameters,
 )
 
@@ -64,6 +65,10 @@ def test_mass_recovery_intervals_and_angle_wrap():
     assert not rows["mass.slope"].within_3sigma
     summary = recovery_summary("X", list(rows.values()), None)
     assert summary["einstein_radius_relative_error"] == pytest.approx(0.03)
+    table = recovery_table([json.loads(json.dumps(summary))])
+    assert table.loc[0, "mass.angle.within_3sigma"]
+    assert table.loc[0, "mass.slope.median"] == 2.2
+    assert np.isnan(table.loc[0, "lens_light.mean"])
     assert summary["criteria"] == {
         "einstein_radius_within_2_percent": False,
         "epl_within_3sigma": False,

@@ -53,6 +53,7 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert counts["phase"] == 15
     assert counts["isophotes"] == 3
     assert counts["recovery"] == 3
+    assert counts["recovery_table"] == 1
     assert counts["summary"] == 1
     assert counts["all"] == 1
     assert not list(tmp_path.iterdir()) or {p.name for p in tmp_path.iterdir()} <= {".snakemake"}
@@ -309,6 +310,9 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
         "epl_within_3sigma",
         "lens_light_within_5_percent",
     }
+    recovered = pd.read_csv(tmp_path / "results" / "summary" / "recovery.csv")
+    assert list(recovered["lens"]) == ["M1"]
+    assert recovered["mass.slope.truth"].iloc[0] == pytest.approx(2.1)
 
     (lens / "mass" / "result.json").unlink()
     target = "results/M1/mass/result.json"
@@ -318,4 +322,6 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert "mgelens phase mass " in rerun.stdout + rerun.stderr
     after = snakemake("-n", f"--configfile={config}", workdir=tmp_path)
     counts = job_counts(after.stdout + after.stderr)
-    assert counts == {"isophotes": 1, "recovery": 1, "summary": 1, "all": 1, "total": 4}
+    assert counts == {
+        "isophotes": 1, "recovery": 1, "recovery_table": 1, "summary": 1, "all": 1, "total": 5
+    }  # fmt: skip

@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import pandas as pd
 
 from mgelens.grid import pixel_centres
 from mgelens.search.results import PhaseResult
@@ -162,3 +163,24 @@ def recovery_summary(
             else bool(light.max_abs < LENS_LIGHT_TOLERANCE),
         },
     }
+
+
+def recovery_table(records: list[Mapping]) -> pd.DataFrame:
+    """One row per lens from :func:`recovery_summary` records: per parameter the truth,
+    median and whether the 3σ interval holds it, the θ_E relative error, lens-light
+    statistics and the three criteria."""
+    rows = []
+    for record in records:
+        row: dict = {"lens": record["lens"]}
+        for entry in record["mass"]:
+            name = entry["name"]
+            row[f"{name}.truth"] = entry["truth"]
+            row[f"{name}.median"] = entry["median"]
+            row[f"{name}.within_3sigma"] = entry["within_3sigma"]
+        row["einstein_radius_relative_error"] = record["einstein_radius_relative_error"]
+        light = record["lens_light"] or {}
+        for key in ("mean", "p95_abs", "max_abs"):
+            row[f"lens_light.{key}"] = light.get(key, np.nan)
+        row.update(record["criteria"])
+        rows.append(row)
+    return pd.DataFrame(rows)

@@ -84,3 +84,24 @@ rule recovery:
     shell:
         "mgelens recovery --lens-dir results/{wildcards.lens}/mock "
         "--phase results/{wildcards.lens}/mass --out {output:q} > {log:q} 2>&1"
+
+
+rule recovery_table:
+    input:
+        recovery_records,
+    output:
+        "results/summary/recovery.csv",
+    log:
+        "logs/recovery_table.log",
+    benchmark:
+        "results/summary/benchmarks/recovery_table.tsv"
+    params:
+        mgelens_version=MGELENS_VERSION,
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens recovery --table {input:q} --out {output:q} > {log:q} 2>&1"

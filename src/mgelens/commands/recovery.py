@@ -10,6 +10,10 @@ Compares the phase's posterior with the true mass parameters of ``truth.json`` (
 extension LENS) with the mock's ``lens_light_blurred.fits`` inside the fit mask beyond
 0.2″ of the lens centre. Prints a table and writes the record as JSON; the exit code is 0
 whether or not the criteria hold (they are in the JSON under ``criteria``).
+
+``--table`` gathers records into one CSV row per lens instead::
+
+    mgelens recovery --table results/*/recovery.json --out results/summary/recovery.csv
 """
 
 import argparse
@@ -19,11 +23,16 @@ from pathlib import Path
 
 from astropy.io import fits
 
-from mgelens.atomic import write_json
+from mgelens.atomic import atomic_path, write_json
 from mgelens.imaging import ImagingError, read_fits_image
 from mgelens.mask import circular
 from mgelens.pipeline.phases import MODEL_FILE
-from mgelens.recovery import lens_light_recovery, mass_recovery, recovery_summary
+from mgelens.recovery import (
+    lens_light_recovery,
+    mass_recovery,
+    recovery_summary,
+    recovery_table,
+)
 from mgelens.search.results import PhaseResult
 
 logger = logging.getLogger(__name__)
@@ -36,14 +45,24 @@ def register(subparsers) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--lens-dir", type=Path, required=True, help="mock folder (truth.json)")
-    parser.add_argument("--phase", type=Path, required=True, help="phase folder, e.g. mass")
+    parser.add_argument("--lens-dir", type=Path, help="mock folder (truth.json)")
+    parser.add_argument("--phase", type=Path, help="phase folder, e.g. results/M1/mass")
     parser.add_argument("--lens", help="lens name (default: the phase folder's parent)")
-    parser.add_argument("--out", type=Path, required=True, help="recovery record (JSON)")
+    parser.add_argument(
+        "--table", type=Path, nargs="+", metavar="RECOVERY.json", help="records to gather"
+    )
+    parser.add_argument(
+        "--out", type=Path, required=True, help="recovery record (JSON) or, with --table, CSV"
+    )
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.table:
+        return _gather(args.table, args.out)
+    if args.lens_dir is None or args.phase is None:
+        logger.error("recovery needs --lens-dir and --phase (or --table to gather records)")
+        return 1
     lens = args.lens or args.phase.resolve().parent.name
     try:
         truth = json.loads((args.lens_dir / "truth.json").read_text())
@@ -74,4 +93,17 @@ def run(args: argparse.Namespace) -> int:
         f"95 % |·| < {light.p95_abs:.3f}, max |·| {light.max_abs:.3f}"
     )
     print("criteria:", ", ".join(f"{k} {v}" for k, v in record["criteria"].items()))
+    return 0
+
+
+def _gather(paths: list[Path], out: Path) -> int:
+    try:
+        records = [json.loads(path.read_text()) for path in paths]
+        table = recovery_table(records)
+    except (OSError, json.JSONDecodeError, KeyError) as exc:
+        logger.error("cannot gather recovery records: %s", exc)
+        return 1
+    with atomic_path(out) as temporary:
+        table.to_csv(temporary, index=False)
+    print(table.to_string(index=False))
     return 0
