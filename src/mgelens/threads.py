@@ -48,8 +48,11 @@ def blas_threads() -> int:
 
 
 def single_threaded_blas():
-    """Context manager for BLAS calls made from parallel numba threads: limits BLAS to one
-    thread unless it is (the :func:`limit_threads` policy) or numba runs one thread."""
+    """Context manager around BLAS calls made from parallel numba threads.
+
+    It limits BLAS to one thread for its duration, and does nothing when BLAS already runs
+    one thread (the :func:`limit_threads` policy) or numba runs one thread.
+    """
     if numba.get_num_threads() == 1 or blas_threads() == 1:
         return contextlib.nullcontext()
     return _controller().limit(limits=1, user_api="blas")

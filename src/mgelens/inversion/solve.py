@@ -358,7 +358,7 @@ def _solve_source_first(
     m = np.flatnonzero(~in_source)
     n_a, n_s = a.size, a.size + e.size
     order = np.concatenate([a, e, m])
-    U = Q.take(order, axis=0).take(order, axis=1)
+    U = Q[np.ix_(order, order)]
     # U.T is Fortran-ordered: LAPACK writes L there in place, i.e. U = Lᵀ into U.
     _, info = scipy.linalg.lapack.dpotrf(U.T, lower=1, clean=1, overwrite_a=1)
     if info != 0:
