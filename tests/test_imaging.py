@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from astropy.io import fits
 
-from mgelens.imaging import Imaging, ImagingError
+from mgelens.imaging import Imaging, ImagingError, read_psf
 from mgelens.mask import circular, contaminant_regions_from_noise
 
 SHAPE = (12, 15)
@@ -418,3 +418,12 @@ def test_slacs0252_contaminant_sentinels(slacs_dir: Path) -> None:
     region = contaminant_regions_from_noise(imaging.noise_map)
     assert region.sum() == 2245  # the count quoted in its info.json notes
     assert np.all(imaging.noise_map[region] == 1e8)
+
+
+def test_read_psf_validates_and_normalises_like_imaging(tmp_path):
+    psf = np.outer([1.0, 2.0, 1.0], [1.0, 3.0, 1.0])
+    fits.writeto(tmp_path / "psf.fits", psf)
+    np.testing.assert_allclose(read_psf(tmp_path / "psf.fits"), psf / psf.sum(), rtol=1e-15)
+    fits.writeto(tmp_path / "even.fits", np.ones((4, 4)))
+    with pytest.raises(ImagingError, match=r"even\.fits: .*odd size"):
+        read_psf(tmp_path / "even.fits")

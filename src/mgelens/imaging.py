@@ -383,6 +383,22 @@ def read_fits_image(path: str | os.PathLike, hdu: int = 0) -> tuple[np.ndarray, 
     return image, header
 
 
+def read_psf(path: str | os.PathLike, hdu: int = 0) -> np.ndarray:
+    """Read a PSF from FITS, validated and normalised to unit sum as :class:`Imaging` does.
+
+    Raises
+    ------
+    ImagingError
+        Naming the file, if it cannot be read or the PSF is even-sized, non-finite or has
+        a non-positive sum.
+    """
+    psf, _ = read_fits_image(path, hdu)
+    try:
+        return _normalised_psf(_as_image(psf, "psf"), str(path))
+    except ImagingError as exc:
+        raise ImagingError(f"{path}: {exc}", component="psf") from exc
+
+
 def read_fits_mask(path: str | os.PathLike, invert: bool = False, hdu: int = 0) -> np.ndarray:
     """Read a mask image: nonzero = excluded (or nonzero = used if ``invert``).
 

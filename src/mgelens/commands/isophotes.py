@@ -29,7 +29,7 @@ from astropy.io import fits
 
 from mgelens.atomic import atomic_path, write_fits, write_json
 from mgelens.convolve import convolve_image
-from mgelens.imaging import PIXSCALE_KEY, ImagingError, read_fits_image
+from mgelens.imaging import PIXSCALE_KEY, ImagingError, read_fits_image, read_psf
 from mgelens.isophotes import (
     IsophoteStatistics,
     brightest_pixel_centre,
@@ -148,7 +148,7 @@ def _image_light(args: argparse.Namespace) -> np.ndarray:
             )
         args.pixel_scale = float(header[PIXSCALE_KEY])
     if args.psf is not None:
-        image = convolve_image(image, _read_psf(args.psf))
+        image = convolve_image(image, read_psf(args.psf))
     return image
 
 
@@ -160,7 +160,7 @@ def _phase_light(args: argparse.Namespace):
     sets, intensities = lens_light_model(args.phase)
     centre = sets[0].centre
     profiles = [g for mge, i in zip(sets, intensities, strict=True) for g in mge.gaussians(i)]
-    image = render_light(profiles, args.pixel_scale, psf=_read_psf(args.psf), centre=centre)
+    image = render_light(profiles, args.pixel_scale, psf=read_psf(args.psf), centre=centre)
     if args.save_image is not None:
         unit = fits.getheader(args.phase / MODEL_FILE, extname="LENS").get("BUNIT", "")
         header = fits.Header({PIXSCALE_KEY: args.pixel_scale, "BUNIT": unit})
@@ -173,9 +173,3 @@ def _phase_light(args: argparse.Namespace):
         angle_interval=interval.get("mass.angle"),
     )
     return image, centre, mass
-
-
-def _read_psf(path: Path) -> np.ndarray:
-    psf, _ = read_fits_image(path)
-    psf = np.asarray(psf, dtype=float)
-    return psf / np.sum(psf)

@@ -32,6 +32,7 @@ from mgelens.recovery import (
     mass_recovery,
     recovery_summary,
     recovery_table,
+    true_mass_parameters,
 )
 from mgelens.search.results import PhaseResult
 
@@ -74,8 +75,9 @@ def run(args: argparse.Namespace) -> int:
         mask_centre = tuple(phase.settings["slam"]["mask_centre"])
         radius = float(phase.settings["mask_radius"])
         mask = circular(true_light.shape, pixel_scale, radius, mask_centre)
-        centre = next(p["parameters"]["centre"] for p in truth["mass"] if p["type"] == "EPL")
-        light = lens_light_recovery(true_light, model_light, mask, pixel_scale, tuple(centre))
+        true_mass = true_mass_parameters(truth)
+        centre = (true_mass["mass.centre_x"], true_mass["mass.centre_y"])
+        light = lens_light_recovery(true_light, model_light, mask, pixel_scale, centre)
     except (OSError, KeyError, ValueError, ImagingError) as exc:
         logger.error("recovery of %s: %s", lens, exc)
         return 1

@@ -132,9 +132,7 @@ def reconstruction_positive_negative(
     Q, D = _validated(Q, D)
     x = _cholesky_solve(Q, D)
     if source_block is not None:
-        source = x[source_block]
-        if source.size and np.allclose(source, source[0]):
-            raise InversionError("pn solve rejected: all source values are equal")
+        _check_source_not_flat(x[source_block])
     return x
 
 
@@ -371,22 +369,13 @@ def _solve_source_first(
         y = np.empty(n)
         _forward_substitute_transposed(U, n, D[order], y)
         _back_substitute_scatter(U, n, y, order, work, x)
-        if not np.all(np.isfinite(x)):
-            raise InversionError("Cholesky solve gave a non-finite solution")
-        source = x[source_block]
-        if source.size and np.allclose(source, source[0]):
-            raise InversionError("pn solve rejected: all source values are equal")
+        _check_source_not_flat(_finite(x)[source_block])
         return LinearSolution(x, False, np.zeros(n, dtype=bool), 0, log_det_source)
     reduced_order = np.concatenate([a, m])
-    unconstrained = _reduced_solve(U, n_a, n_s, D[reduced_order], work)
-    if not np.all(np.isfinite(unconstrained)):
-        raise InversionError("Cholesky solve gave a non-finite solution")
-    # the NNLS runs on the reduced system in its original index order
-    reduced_index = np.flatnonzero(free)
-    position = np.empty(n, dtype=np.int64)
-    position[reduced_order] = np.arange(reduced_order.size)
+    unconstrained = np.zeros(n)  # scattered back to the original index order of the NNLS
+    unconstrained[reduced_order] = _finite(_reduced_solve(U, n_a, n_s, D[reduced_order], work))
     result = reconstruction_positive_only(
-        Q[np.ix_(free, free)], D[free], unconstrained=unconstrained[position[reduced_index]]
+        Q[np.ix_(free, free)], D[free], unconstrained=unconstrained[free]
     )
     x[free] = result.x
     return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
@@ -425,7 +414,17 @@ def _cholesky_solve(Q: np.ndarray, D: np.ndarray) -> np.ndarray:
         factor = scipy.linalg.cho_factor(Q, lower=True, check_finite=False)
     except np.linalg.LinAlgError as error:
         raise InversionError(f"matrix not positive definite: {error}") from error
-    x = scipy.linalg.cho_solve(factor, D, check_finite=False)
+    return _finite(scipy.linalg.cho_solve(factor, D, check_finite=False))
+
+
+def _check_source_not_flat(source: np.ndarray) -> None:
+    """The anchor's pn sanity check: reject a solution whose source values are all equal."""
+    if source.size and np.allclose(source, source[0]):
+        raise InversionError("pn solve rejected: all source values are equal")
+
+
+def _finite(x: np.ndarray) -> np.ndarray:
+    """``x``, or :class:`InversionError` if a Cholesky solve gave non-finite values."""
     if not np.all(np.isfinite(x)):
         raise InversionError("Cholesky solve gave a non-finite solution")
     return x
