@@ -18,7 +18,7 @@ from mgelens.fit import (
 from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
-from mgelens.light import MGESet
+from mgelens.light import MGESet, Sersic
 from mgelens.mass import SIE, ExternalShear
 from mgelens.source.image_mesh import overlay_centres
 from mgelens.source.regularization import Constant, ConstantSplit
@@ -158,6 +158,34 @@ def test_parametric_source_joins_the_linear_system():
     assert np.allclose(result.lens_light_intensities, lens_truth, rtol=1e-6)
     assert np.allclose(result.source_light_intensities, source_truth_values, rtol=1e-6)
     assert result.log_evidence == result.log_likelihood
+
+
+def test_sersic_lens_light_is_solved_linearly_or_subtracted_when_fixed():
+    """Two Sérsics + a source MGE: their I_e are recovered as linear unknowns (the
+    profiles' own intensities are ignored); given as fixed light with the true I_e they
+    are subtracted and only the source is solved."""
+    blank = make_dataset(settings=FitSettings(lp_sub_size_centre=8, mge_diagonal=0.0))
+    truth = (
+        Sersic((0.02, -0.03), ell_comps_from(0.7, 40.0), 0.5, 3.5, intensity=2.0),
+        Sersic((0.02, -0.03), ell_comps_from(0.5, 80.0), 1.2, 1.0, intensity=0.3),
+    )
+    source_sets = (MGESet.extended((0.05, 0.0), ell_comps_from(0.8, 10.0), PIXEL, 1.0, 8),)
+    source_values = np.geomspace(5.0, 0.5, 8)
+    lens_image = blank.light_grid.blurred_image(list(truth))
+    image = lens_image + source_light_columns(blank, MASS, source_sets) @ source_values
+    dataset = with_data(blank, image)
+    unit = tuple(Sersic(s.centre, s.ell_comps, s.effective_radius, s.sersic_index) for s in truth)
+    linear = fit(dataset, LensModel(MASS, lens_light=unit, source=MGESource(source_sets)))
+    assert (linear.n_lens_light, linear.n_source_light) == (2, 8)
+    assert np.allclose(linear.lens_light_intensities, [2.0, 0.3], rtol=1e-6)
+    assert np.allclose(linear.source_light_intensities, source_values, rtol=1e-6)
+    assert linear.chi_squared < 1e-8
+    fixed = fit(dataset, LensModel(MASS, fixed_light=truth, source=MGESource(source_sets)))
+    assert fixed.n_lens_light == 0
+    assert np.allclose(fixed.source_light_intensities, source_values, rtol=1e-6)
+    assert np.allclose(fixed.lens_light_image, lens_image, rtol=1e-12)
+    wrong = fit(dataset, LensModel(MASS, lens_light=unit[:1], source=MGESource(source_sets)))
+    assert wrong.chi_squared > 1e3
 
 
 def test_evidence_peaks_near_the_true_regularization_strength():

@@ -92,6 +92,22 @@ def test_mge_columns_equal_binned_gaussians():
     )
 
 
+@pytest.mark.parametrize("n", [0.8, 1.0, 4.0])
+def test_sersic_column_is_the_binned_unit_intensity_image(n):
+    """The linear Sérsic's column ignores ``intensity`` (it is solved) and handles a
+    sub-pixel exactly at the centre (ξ = 0, I = I_e e^{b_n})."""
+    x, y = pixel_centres((21, 21), 0.05)
+    grid = sub_grid(x.ravel(), y.ravel(), 0.05, np.where(np.hypot(x, y).ravel() < 0.2, 15, 4))
+    centre = (float(grid.x[0]), float(grid.y[0]))
+    sersic = Sersic(centre, ell_comps_from(0.6, 25.0), 0.4, n, intensity=7.0)
+    column = sersic.columns(grid)
+    assert column.shape == (441, 1)
+    unit = Sersic(centre, sersic.ell_comps, 0.4, n, intensity=1.0)
+    assert np.allclose(column[:, 0], grid.bin(unit.image(grid.x, grid.y)), rtol=1e-12)
+    assert sersic.n_columns == 1
+    assert sersic.cache_key == unit.cache_key
+
+
 @pytest.mark.parametrize(("sub_size", "tolerance"), [(4, 6e-3), (16, 4e-4)])
 def test_over_sampling_converges_to_the_pixel_integral(sub_size, tolerance):
     sigma, delta = 0.05, 0.05

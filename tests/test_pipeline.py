@@ -110,7 +110,7 @@ def test_sp_space_has_17_parameters_and_one_shared_lens_light_centre():
     assert space.parameter("lens_light.set_1.centre_x").tied_to == "lens_light.set_0.centre_x"
     assert space.parameter("lens_light.set_1.centre_y").tied_to == "lens_light.set_0.centre_y"
     values = space.values(space.vector(SP_VALUES))
-    first, second = models.lens_light_sets(values, SP_SPECS)
+    first, second = models.lens_light_components(values, SP_SPECS)
     assert first.centre == second.centre == (0.01, -0.07)
     assert first.ell_comps == (0.05, -0.1)
     assert second.ell_comps == (0.2, 0.1)
@@ -168,6 +168,65 @@ def test_fixed_components_take_the_earlier_maximum_likelihood(chain):
         mass.parameter("regularization.signal_scale").value
         == chain["spix2"].max_likelihood["regularization.signal_scale"]
     )
+
+
+SERSIC_VALUES = {
+    **{k: v for k, v in SP_VALUES.items() if not k.startswith("lens_light.")},
+    "lens_light.sersic_0.centre_x": 0.01,
+    "lens_light.sersic_0.centre_y": -0.07,
+    "lens_light.sersic_0.ell_comps_1": 0.05,
+    "lens_light.sersic_0.ell_comps_2": -0.1,
+    "lens_light.sersic_0.effective_radius": 0.6,
+    "lens_light.sersic_0.sersic_index": 3.5,
+    "lens_light.sersic_1.ell_comps_1": 0.2,
+    "lens_light.sersic_1.ell_comps_2": 0.1,
+    "lens_light.sersic_1.effective_radius": 1.5,
+    "lens_light.sersic_1.sersic_index": 1.2,
+}
+
+
+def test_sersic_spaces_follow_the_papers_comparison_chain(chain):
+    """3×Sérsic (SPEC §2.3, §8.1): SP 2 Sérsics sharing a centre (21 free), LIGHT 3 (14),
+    MASS fits the Sérsics with the EPL (22), their priors passed from LIGHT."""
+    sp_space = models.sp_space(models.sersic_specs(2))
+    assert sp_space.n_free == 21
+    tie = sp_space.parameter("lens_light.sersic_1.centre_y").tied_to
+    assert tie == "lens_light.sersic_0.centre_y"
+    assert sp_space.parameter("lens_light.sersic_1.effective_radius").prior == Uniform(0.0, 30.0)
+    assert sp_space.parameter("lens_light.sersic_0.sersic_index").prior == Uniform(0.8, 5.0)
+    values = sp_space.values(sp_space.vector(SERSIC_VALUES))
+    first, second = models.lens_light_components(values, models.sersic_specs(2))
+    assert first.centre == second.centre == (0.01, -0.07)
+    assert (second.effective_radius, second.sersic_index) == (1.5, 1.2)
+    with pytest.raises(models.UnphysicalSample, match="effective_radius"):
+        models.SersicSpec("sersic_0").component(
+            {**values, "lens_light.sersic_0.effective_radius": 0.0}
+        )
+
+    sp = fake_result("sp", sp_space, SERSIC_VALUES)
+    assert models.light_centre(sp) == pytest.approx((0.01, -0.07), abs=0.05)
+    light_space = models.light_space(models.sersic_specs(3), sp, chain["spix1"], chain["spix2"])
+    assert light_space.n_free == 14
+    cx = sp.max_likelihood["lens_light.sersic_0.centre_x"]
+    assert light_space.parameter("lens_light.sersic_0.centre_x").prior == Uniform(
+        cx - 0.1, cx + 0.1
+    )
+    light_values = {n: 0.05 for n in light_space.free_names}
+    light_values.update({n: 1.0 for n in light_space.free_names if n.endswith("radius")})
+    light_values.update({n: 4.9 for n in light_space.free_names if n.endswith("index")})
+    light = fake_result("light", light_space, light_values, scale=0.02)
+
+    fixed = models.mass_space(light, chain["spix1"], chain["spix2"])
+    assert fixed.n_free == 8
+    space = models.mass_space(light, chain["spix1"], chain["spix2"], free_lens_light=True)
+    assert space.n_free == 22
+    assert space.parameter("lens_light.sersic_2.centre_x").tied_to == "lens_light.sersic_0.centre_x"
+    radius = space.parameter("lens_light.sersic_1.effective_radius").prior
+    assert radius.mean == pytest.approx(light.median["lens_light.sersic_1.effective_radius"])
+    assert radius.sigma == pytest.approx(radius.mean)  # relative width 1.0 beats 3σ ≈ 0.06
+    assert (radius.lower, radius.upper) == (0.0, np.inf)
+    index = space.parameter("lens_light.sersic_0.sersic_index").prior
+    assert (index.sigma, index.lower, index.upper) == (1.5, 0.8, 5.0)
 
 
 # -- prior passing ----------------------------------------------------------------------
@@ -439,17 +498,17 @@ def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):
 def test_lens_light_and_mass_models_rebuild_from_json(sp_run):
     results, result = sp_run
     folder = results / "sp"
-    sets, intensities = phases.lens_light_model(folder)
+    gaussians = phases.lens_light_profiles(folder)
     best = result.max_likelihood
-    assert len(sets) == 2
-    assert [i.size for i in intensities] == [30, 30]
-    assert sets[1].centre == pytest.approx(
+    assert len(gaussians) == 60
+    assert gaussians[45].centre == pytest.approx(
         (best["lens_light.set_0.centre_x"], best["lens_light.set_0.centre_y"])
     )
-    assert sets[1].ell_comps == pytest.approx(
+    assert gaussians[45].ell_comps == pytest.approx(
         (best["lens_light.set_1.ell_comps_1"], best["lens_light.set_1.ell_comps_2"])
     )
-    assert all(np.all(i >= 0) for i in intensities)
+    assert gaussians[45].sigma == pytest.approx(SP_SPECS[1].sigmas[15])
+    assert all(g.intensity >= 0 for g in gaussians)
     sie, shear = phases.mass_model(folder)
     assert isinstance(sie, SIE)
     assert sie.einstein_radius == pytest.approx(best["mass.einstein_radius"])
@@ -517,7 +576,7 @@ def test_isophotes_of_a_phase_render_its_lens_light(sp_run, mock_dir, tmp_path):
     cut = rendered[20:51, 20:51]
     x, y = pixel_centres(fitted.shape, PIXEL)
     centre = json.loads((folder / "result.json").read_text())["max_likelihood_fit"]
-    centre = centre["lens_light"]["sets"][0]["centre"]
+    centre = centre["lens_light"]["components"][0]["centre"]
     radius = np.hypot(x - centre[0], y - centre[1])
     # beyond 0.8″ the fit's coarser over-sampling (quick profile: 2×2) has converged
     inside = (np.hypot(x, y) < MASK_RADIUS - 0.3) & (radius > 0.8)
@@ -534,3 +593,91 @@ def test_isophotes_of_a_phase_need_the_psf(sp_run, tmp_path, caplog):
     folder = sp_run[0] / "sp"
     assert main(["isophotes", "--phase", str(folder), "--out", str(tmp_path / "t.csv")]) == 1
     assert "--phase needs --psf" in caplog.text
+
+
+# -- the 3×Sérsic chain -------------------------------------------------------------------
+def sersic_settings(**changes):
+    capped = {"progress_every": 1e9, "n_live": 12}
+    iterations = {"sp": 60, "spix1": 20, "spix2": 15, "light": 20, "mass": 20}
+    return settings_from_mapping(
+        {
+            "mask_radius": MASK_RADIUS,
+            "lp_sub_size_centre": 4,
+            "lens_light_model": "sersic",
+            "positive_only": False,
+            "source_pixels": 60,
+            "overlay_shape": [8, 8],
+            "samplers": {p: {**capped, "max_iterations": n} for p, n in iterations.items()},
+            **changes,
+        }
+    )
+
+
+@pytest.fixture(scope="module")
+def sersic_run(mock_dir, tmp_path_factory):
+    """The five phases with ``lens_light_model: sersic`` and capped samplers (plumbing)."""
+    results = tmp_path_factory.mktemp("sersic")
+    settings = sersic_settings()
+    for phase in PHASES:
+        phases.run_phase(phase, mock_dir, results, settings, seed=1, threads=1)
+    return results
+
+
+def _components(folder):
+    record = json.loads((folder / "result.json").read_text())["max_likelihood_fit"]
+    return record["lens_light"]["components"]
+
+
+def test_sersic_chain_fixes_sps_sersics_in_the_spix_phases(sersic_run, mock_dir):
+    sp, spix1 = _components(sersic_run / "sp"), _components(sersic_run / "spix1")
+    assert [c["kind"] for c in sp] == ["sersic", "sersic"]
+    assert all(c["fixed"] for c in spix1)
+    for solved, fixed in zip(sp, spix1, strict=True):
+        for key in ("centre", "ell_comps", "effective_radius", "sersic_index", "intensity"):
+            assert fixed[key] == pytest.approx(solved[key])
+    # the lens light of SPix1/SPix2 is SP's solved Sérsic light, subtracted unchanged (SP's
+    # own image differs only by its over-sampling centre, the prior centre (0, 0))
+    dataset = phases.spix1_problem(mock_dir, sersic_run, sersic_settings()).dataset
+    expected = dataset.light_grid.blurred_image(list(phases.lens_light_profiles(sersic_run / "sp")))
+    sp_lens = fits.getdata(sersic_run / "sp" / "model.fits", extname="LENS")
+    scale = np.abs(sp_lens).max()
+    for phase in ("spix1", "spix2"):
+        lens = fits.getdata(sersic_run / phase / "model.fits", extname="LENS")
+        np.testing.assert_allclose(lens[~dataset.mask], expected, rtol=1e-6, atol=1e-9 * scale)
+        np.testing.assert_allclose(lens, sp_lens, atol=0.01 * scale)
+        assert PhaseResult.read(sersic_run / phase).space.n_free == (8 if phase == "spix1" else 5)
+
+
+def test_sersic_chain_refits_three_sersics_and_frees_them_with_the_mass(sersic_run):
+    light, mass = PhaseResult.read(sersic_run / "light"), PhaseResult.read(sersic_run / "mass")
+    assert light.space.n_free == 14
+    assert mass.space.n_free == 22
+    assert mass.space.parameter("mass.slope").prior == Uniform(1.5, 3.0)
+    assert isinstance(
+        mass.space.parameter("lens_light.sersic_2.sersic_index").prior, TruncatedGaussian
+    )
+    profiles = phases.lens_light_profiles(sersic_run / "mass")
+    assert [type(p).__name__ for p in profiles] == ["Sersic"] * 3
+    best = mass.max_likelihood
+    assert profiles[2].effective_radius == pytest.approx(
+        best["lens_light.sersic_2.effective_radius"]
+    )
+    assert all(not c.get("fixed", False) for c in _components(sersic_run / "mass"))
+    summary = json.loads((sersic_run / "mass" / "result.json").read_text())
+    assert summary["max_likelihood_fit"]["positive_only"] is False
+
+
+def test_sersic_and_mge_results_do_not_mix(sersic_run, mock_dir):
+    with pytest.raises(phases.PhaseInputError, match="lens_light_model = 'sersic'"):
+        phases.spix1_problem(mock_dir, sersic_run, sersic_settings(lens_light_model="mge"))
+
+
+def test_isophotes_of_a_sersic_phase(sersic_run, mock_dir, tmp_path):
+    folder = sersic_run / "mass"
+    arguments = ["isophotes", "--phase", str(folder), "--psf", str(mock_dir / "psf.fits")]
+    arguments += ["--pixel-scale", str(PIXEL), "--summary", str(tmp_path / "summary.json")]
+    assert main([*arguments, "--out", str(tmp_path / "isophotes.csv")]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    epl = phases.mass_model(folder)[0]
+    assert summary["mass"]["axis_ratio"] == pytest.approx(epl.axis_ratio)
+    assert summary["inputs"]["phase"] == str(folder)

@@ -169,17 +169,18 @@ class FitDataset:
         """Tiling of the masked pixels for the source curvature matrix."""
         return TilePlan.from_mask(self.mask, self.convolver.psf)
 
-    def lens_light_columns(self, sets: tuple[MGESet, ...]) -> np.ndarray:
-        """PSF-convolved unit columns of the lens-light sets (N_I, Σ N_g), cached.
+    def lens_light_columns(self, components: tuple) -> np.ndarray:
+        """PSF-convolved unit columns of the linear lens light (MGE sets, Sérsics),
+        (N_I, Σ n_columns), cached.
 
-        Phases that keep the MGE geometry fixed and only re-solve intensities pay for the
+        Phases that keep the light geometry fixed and only re-solve intensities pay for the
         columns once.
         """
-        key = tuple((tuple(s.centre), tuple(s.ell_comps), s.sigmas.tobytes()) for s in sets)
+        key = tuple(c.cache_key for c in components)
         if key not in self._columns_cache:
             if len(self._columns_cache) >= 4:
                 self._columns_cache.pop(next(iter(self._columns_cache)))
-            self._columns_cache[key] = self.light_grid.blurred_columns(list(sets))
+            self._columns_cache[key] = self.light_grid.blurred_columns(list(components))
         return self._columns_cache[key]
 
     def repeated_source(self, mass, source: "PixelizedSource") -> "SourceSystem | None":
@@ -244,15 +245,17 @@ class LensModel:
     ----------
     mass : tuple
         Mass profiles (EPL, SIE, ExternalShear, ...), deflections summed.
-    lens_light : tuple of MGESet
-        Linear lens light: every Gaussian's intensity is solved.
+    lens_light : tuple of MGESet or Sersic
+        Linear lens light: every Gaussian's and every Sérsic's intensity is solved (the
+        profiles' own ``intensity`` is ignored).
     fixed_light : tuple
-        Non-linear light with fixed intensities (e.g. Sérsic), subtracted from the data.
+        Light with fixed intensities (e.g. a Sérsic fixed by an earlier phase), subtracted
+        from the data.
     source : MGESource, PixelizedSource or None
     """
 
     mass: tuple = ()
-    lens_light: tuple[MGESet, ...] = ()
+    lens_light: tuple = ()
     fixed_light: tuple = ()
     source: MGESource | PixelizedSource | None = None
 

@@ -1,5 +1,9 @@
 """Light profiles: elliptical Gaussian, elliptical Sérsic and MGE sets (SPEC §2).
 
+MGE sets and Sérsics are also *linear* light components: ``columns(grid)`` gives their
+unit-intensity images (one column per Gaussian, one per Sérsic), whose coefficients the
+inversion solves.
+
 Conventions: (x, y) in arcsec, angles in degrees counter-clockwise from +x,
 ``ell_comps = (e1, e2)`` (see :mod:`mgelens.geometry`); intensities are surface
 brightness in data units per pixel (e.g. e⁻ s⁻¹ pix⁻¹), so a profile's pixel sum is
@@ -123,6 +127,14 @@ class Sersic:
         if not 0.2 <= self.sersic_index <= 10.0:
             raise ValueError(f"sersic_index must be in [0.2, 10], got {self.sersic_index}")
 
+    n_columns = 1
+    """Columns a linear Sérsic adds to the linear system (its I_e)."""
+
+    @property
+    def cache_key(self) -> tuple:
+        """Everything its unit-intensity column depends on (``intensity`` does not)."""
+        return ("sersic", *self.centre, *self.ell_comps, self.effective_radius, self.sersic_index)
+
     def image(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         q, angle = axis_ratio_and_angle_from(self.ell_comps)
         xp, yp = to_profile_frame(x, y, self.centre, angle)
@@ -130,6 +142,27 @@ class Sersic:
         b_n = sersic_constant(self.sersic_index)
         exponent = (xi / self.effective_radius) ** (1.0 / self.sersic_index) - 1.0
         return self.intensity * np.exp(-b_n * exponent)
+
+    def columns(self, grid: SubGrid) -> np.ndarray:
+        """Unit-I_e image binned over ``grid``: (n_pixels, 1), before the PSF.
+
+        ``intensity`` is ignored: as a linear profile its I_e is solved (SPEC §2.3).
+        """
+        q, angle = axis_ratio_and_angle_from(self.ell_comps)
+        column = _sersic_column(
+            grid.x,
+            grid.y,
+            grid.starts,
+            grid.sub_sizes,
+            float(self.centre[0]),
+            float(self.centre[1]),
+            float(q),
+            float(np.deg2rad(angle)),
+            float(np.log(self.effective_radius)),
+            1.0 / self.sersic_index,
+            sersic_constant(self.sersic_index),
+        )
+        return column[:, None]
 
     def total_flux(self, pixel_scale: float = 1.0) -> float:
         """Analytic integral 2π n R_e² I_e e^{b_n} Γ(2n)/b_n^{2n}, divided by Δ²."""
@@ -202,6 +235,16 @@ class MGESet:
     def n_gaussians(self) -> int:
         return self.sigmas.size
 
+    @property
+    def n_columns(self) -> int:
+        """Columns the set adds to the linear system (one per Gaussian)."""
+        return self.sigmas.size
+
+    @property
+    def cache_key(self) -> tuple:
+        """Everything its unit-intensity columns depend on."""
+        return ("mge", *self.centre, *self.ell_comps, self.sigmas.tobytes())
+
     def gaussians(self, intensities: np.ndarray | None = None) -> list[Gaussian]:
         """The set as individual :class:`Gaussian` objects (unit intensity by default)."""
         values = np.ones(self.n_gaussians) if intensities is None else intensities
@@ -257,6 +300,29 @@ def _gaussian_columns(x, y, starts, sub_sizes, xc, yc, q, phi, inv_two_sigma2):
     return out
 
 
+@njit(parallel=True, fastmath=True)
+def _sersic_column(x, y, starts, sub_sizes, xc, yc, q, phi, log_re, inv_n, b_n):
+    n_pix = starts.size
+    out = np.empty(n_pix)
+    cos_phi = np.cos(phi)
+    sin_phi = np.sin(phi)
+    for p in prange(n_pix):
+        acc = 0.0
+        n_sub = sub_sizes[p] * sub_sizes[p]
+        for s in range(starts[p], starts[p] + n_sub):
+            dx = x[s] - xc
+            dy = y[s] - yc
+            xp = dx * cos_phi + dy * sin_phi
+            yp = -dx * sin_phi + dy * cos_phi
+            xi2 = q * xp * xp + yp * yp / q
+            if xi2 > 0.0:
+                acc += np.exp(-b_n * (np.exp((0.5 * np.log(xi2) - log_re) * inv_n) - 1.0))
+            else:
+                acc += np.exp(b_n)
+        out[p] = acc / n_sub
+    return out
+
+
 @dataclass(frozen=True)
 class LightGrid:
     """Over-sampled evaluation grid + PSF for lens-light images inside a mask.
@@ -292,9 +358,10 @@ class LightGrid:
     def n_image_pixels(self) -> int:
         return int(np.count_nonzero(~self.convolver.mask))
 
-    def blurred_columns(self, sets: list[MGESet]) -> np.ndarray:
-        """PSF-convolved unit-intensity columns of all sets, (N_I, Σ N_g), set by set."""
-        columns = np.concatenate([s.columns(self.grid) for s in sets], axis=1)
+    def blurred_columns(self, components: list) -> np.ndarray:
+        """PSF-convolved unit-intensity columns of linear light components (MGE sets,
+        Sérsics), (N_I, Σ n_columns), component by component."""
+        columns = np.concatenate([c.columns(self.grid) for c in components], axis=1)
         return self.convolver.blur_columns(columns, include_blurring=True)
 
     def blurred_image(self, profiles: list) -> np.ndarray:

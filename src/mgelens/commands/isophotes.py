@@ -10,11 +10,12 @@ The image is taken as it is (e.g. the PSF-convolved lens-light model); ``--psf``
 it first (for an unconvolved model image). Coordinates follow SPEC §1.1: (x, y) arcsec with
 (0, 0) at the image centre, row index increasing with +y.
 
-With ``--phase`` instead of an image, the lens light is the maximum-likelihood MGE of a
-SLaM phase folder (SPEC §9: the final L/M-phase model), rendered on a ±3.5″ grid at the
-``--pixel-scale`` (default 0.05″) with the fits' over-sampling and convolved with
-``--psf`` (required); the centre is the MGE centre, and the phase's mass model (q, φ with
-3σ intervals, critical curve, Einstein radius, SPEC §9.3) joins the summary and figure::
+With ``--phase`` instead of an image, the lens light is the maximum-likelihood lens light
+(MGE or Sérsics) of a SLaM phase folder (SPEC §9: the final L/M-phase model), rendered on a
+±3.5″ grid at the ``--pixel-scale`` (default 0.05″) with the fits' over-sampling and
+convolved with ``--psf`` (required); the centre is the first component's centre, and the
+phase's mass model (q, φ with 3σ intervals, critical curve, Einstein radius, SPEC §9.3)
+joins the summary and figure::
 
     mgelens isophotes --phase results/M1/mass --psf results/M1/mock/psf.fits \
         --save-image results/M1/lens_light.fits --out results/M1/isophotes.csv
@@ -38,7 +39,7 @@ from mgelens.isophotes import (
     mass_shape_from,
     render_light,
 )
-from mgelens.pipeline.phases import MODEL_FILE, PhaseInputError, lens_light_model, mass_model
+from mgelens.pipeline.phases import MODEL_FILE, PhaseInputError, lens_light_profiles, mass_model
 from mgelens.plot import save_png
 from mgelens.plot.isophotes import isophote_figure
 from mgelens.search.results import PhaseResult
@@ -59,9 +60,7 @@ def register(subparsers) -> None:
     )
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("image", type=Path, nargs="?", help="FITS image of the lens light")
-    source.add_argument(
-        "--phase", type=Path, help="SLaM phase folder whose MGE lens light is analysed"
-    )
+    source.add_argument("--phase", type=Path, help="SLaM phase folder whose lens light is analysed")
     parser.add_argument(
         "--pixel-scale",
         type=float,
@@ -153,13 +152,12 @@ def _image_light(args: argparse.Namespace) -> np.ndarray:
 
 
 def _phase_light(args: argparse.Namespace):
-    """(image, centre, MassShape) of the MGE lens light of the phase folder ``args.phase``."""
+    """(image, centre, MassShape) of the lens light of the phase folder ``args.phase``."""
     if args.psf is None:
         raise ValueError("--phase needs --psf: the PSF of the lens's imaging (psf.fits)")
     args.pixel_scale = args.pixel_scale or DEFAULT_PIXEL_SCALE
-    sets, intensities = lens_light_model(args.phase)
-    centre = sets[0].centre
-    profiles = [g for mge, i in zip(sets, intensities, strict=True) for g in mge.gaussians(i)]
+    profiles = lens_light_profiles(args.phase)
+    centre = profiles[0].centre
     image = render_light(profiles, args.pixel_scale, psf=read_psf(args.psf), centre=centre)
     if args.save_image is not None:
         unit = fits.getheader(args.phase / MODEL_FILE, extname="LENS").get("BUNIT", "")

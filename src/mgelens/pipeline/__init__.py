@@ -10,7 +10,7 @@
 
 from mgelens.pipeline.phases import (
     PhaseInputError,
-    lens_light_model,
+    lens_light_profiles,
     limit_threads,
     mass_model,
     read_phase,
@@ -31,7 +31,7 @@ __all__ = [
     "PhaseInputError",
     "SettingsError",
     "SlamSettings",
-    "lens_light_model",
+    "lens_light_profiles",
     "limit_threads",
     "load_settings",
     "mass_model",

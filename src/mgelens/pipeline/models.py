@@ -6,6 +6,9 @@ Parameter names (stable, dotted; SPEC §8.1):
   ``point`` (10 Gaussians): ``lens_light.<set>.centre_x``, ``.centre_y``, ``.ell_comps_1``,
   ``.ell_comps_2``. The extended sets share one centre: the centres of ``set_1``, ... are
   tied to those of ``set_0``. The point set has its own centre.
+  The 3×Sérsic alternative (SPEC §2.3, §8.1) uses ``sersic_0``, ``sersic_1``, ... instead,
+  each with ``.effective_radius`` (arcsec) and ``.sersic_index`` besides the four above;
+  their centres are tied to ``sersic_0``'s. Every intensity is solved linearly.
 * mass: ``mass.centre_x``, ``mass.centre_y``, ``mass.ell_comps_1``, ``mass.ell_comps_2``,
   ``mass.einstein_radius`` and, for the EPL, ``mass.slope`` (without it the profile is the
   SIE); external shear ``shear.gamma_1``, ``shear.gamma_2``.
@@ -28,7 +31,7 @@ from scipy import optimize
 from sklearn.exceptions import ConvergenceWarning
 
 from mgelens.fit import LensModel, MGESource, PixelizedSource
-from mgelens.light import MGESet, log_spaced_sigmas
+from mgelens.light import MGESet, Sersic, log_spaced_sigmas
 from mgelens.mass import EPL, SIE, SLOPE_RANGE, ExternalShear, ray_trace
 from mgelens.search.model import Parameter, ParameterSpace
 from mgelens.search.priors import Gaussian, LogUniform, Prior, TruncatedGaussian, Uniform
@@ -48,6 +51,8 @@ LIGHT_PHASE_ELL_COMPS_PRIOR = Uniform(-0.7, 0.7)
 """ell_comps of the extended sets in the LIGHT phase (SPEC §8.1)."""
 LIGHT_PHASE_CENTRE_HALF_WIDTH = 0.1
 """LIGHT-phase centres are U(c_SP ± 0.1″) (SPEC §8.1)."""
+SERSIC_PRIORS = {"effective_radius": Uniform(0.0, 30.0), "sersic_index": Uniform(0.8, 5.0)}
+"""Anchor priors of a linear Sérsic's R_e (arcsec) and n (autogalaxy ``linear/sersic.yaml``)."""
 EINSTEIN_RADIUS_PRIOR = Uniform(0.0, 8.0)
 SHEAR_PRIOR = Uniform(-0.2, 0.2)
 SLOPE_PRIOR = Uniform(1.5, 3.0)
@@ -84,6 +89,60 @@ class LightSetSpec:
     def prefix(self) -> str:
         return f"{LENS_LIGHT}.{self.name}"
 
+    def component(self, values: Mapping[str, float]) -> MGESet:
+        """The set with centre and ell_comps from ``values``."""
+        centre, ell_comps = _centre_and_ell_comps(values, self.prefix)
+        return MGESet(centre, ell_comps, self.sigmas)
+
+    def describe(self) -> dict:
+        return {"name": self.name, "kind": "mge", "n_gaussians": int(self.sigmas.size)}
+
+
+@dataclass(frozen=True)
+class SersicSpec:
+    """One elliptical Sérsic of the lens light (``sersic_<k>``) whose I_e is solved linearly."""
+
+    name: str
+
+    @property
+    def prefix(self) -> str:
+        return f"{LENS_LIGHT}.{self.name}"
+
+    def component(self, values: Mapping[str, float]) -> Sersic:
+        """The unit-intensity Sérsic of ``values``.
+
+        Raises
+        ------
+        UnphysicalSample
+            If R_e ≤ 0 (the edge of its prior) or n lies outside the Sérsic's range.
+        """
+        centre, ell_comps = _centre_and_ell_comps(values, self.prefix)
+        try:
+            return Sersic(
+                centre,
+                ell_comps,
+                values[f"{self.prefix}.effective_radius"],
+                values[f"{self.prefix}.sersic_index"],
+            )
+        except ValueError as error:
+            raise UnphysicalSample(f"{self.name}: {error}") from error
+
+    def describe(self) -> dict:
+        return {"name": self.name, "kind": "sersic"}
+
+
+LightSpec = LightSetSpec | SersicSpec
+
+
+def _centre_and_ell_comps(values: Mapping[str, float], prefix: str):
+    centre = (values[f"{prefix}.centre_x"], values[f"{prefix}.centre_y"])
+    return centre, (values[f"{prefix}.ell_comps_1"], values[f"{prefix}.ell_comps_2"])
+
+
+def sersic_specs(n_profiles: int) -> tuple[SersicSpec, ...]:
+    """``n_profiles`` Sérsics ``sersic_0``, ... (2 in SP, 3 in LIGHT; SPEC §8.1)."""
+    return tuple(SersicSpec(f"sersic_{k}") for k in range(n_profiles))
+
 
 def mge_specs(
     n_sets: int, point_set: bool, pixel_scale: float, mask_radius: float
@@ -105,14 +164,15 @@ def _geometry(prefix: str, centre: Sequence[Prior], ell_comps: Sequence[Prior]) 
 
 
 def lens_light_parameters(
-    specs: Sequence[LightSetSpec],
+    specs: Sequence[LightSpec],
     centre: Sequence[Prior],
     ell_comps: Prior,
     point_centre: Sequence[Prior] = (),
     point_ell_comps: Prior = ELL_COMPS_PRIOR,
 ) -> list[Parameter]:
-    """Free lens-light geometry: one shared centre for the extended sets (later sets' centres
-    tied to ``set_0``), own ell_comps per set; the point set has its own centre and ell_comps.
+    """Free lens-light geometry: one shared centre for the extended sets or Sérsics (later
+    ones' centres tied to the first), own ell_comps each (Sérsics also R_e and n,
+    :data:`SERSIC_PRIORS`); the point set has its own centre and ell_comps.
     """
     parameters: list[Parameter] = []
     first = None
@@ -121,6 +181,8 @@ def lens_light_parameters(
             parameters += _geometry(spec.prefix, point_centre, (point_ell_comps,) * 2)
             continue
         geometry = _geometry(spec.prefix, centre, (ell_comps,) * 2)
+        if isinstance(spec, SersicSpec):
+            geometry += [Parameter(f"{spec.prefix}.{n}", prior=p) for n, p in SERSIC_PRIORS.items()]
         if first is None:
             first = spec.prefix
         else:
@@ -132,18 +194,9 @@ def lens_light_parameters(
     return parameters
 
 
-def lens_light_sets(
-    values: Mapping[str, float], specs: Sequence[LightSetSpec]
-) -> tuple[MGESet, ...]:
-    """The MGE sets of ``specs`` with centres and ell_comps from ``values``."""
-    return tuple(
-        MGESet(
-            (values[f"{s.prefix}.centre_x"], values[f"{s.prefix}.centre_y"]),
-            (values[f"{s.prefix}.ell_comps_1"], values[f"{s.prefix}.ell_comps_2"]),
-            s.sigmas,
-        )
-        for s in specs
-    )
+def lens_light_components(values: Mapping[str, float], specs: Sequence[LightSpec]) -> tuple:
+    """The linear lens light of ``specs`` (MGE sets, unit Sérsics) with values from ``values``."""
+    return tuple(spec.component(values) for spec in specs)
 
 
 # -- mass -------------------------------------------------------------------------------
@@ -426,23 +479,30 @@ SourceModel = MGESourceModel | MeshSourceModel | KMeansSourceModel | FixedSource
 
 @dataclass(frozen=True, eq=False)
 class PhaseModel:
-    """Maps a values dict onto a :class:`~mgelens.fit.LensModel` (picklable)."""
+    """Maps a values dict onto a :class:`~mgelens.fit.LensModel` (picklable).
 
-    lens_light: tuple[LightSetSpec, ...]
+    ``fixed_light`` holds light profiles with fixed intensities (the SPix phases of the
+    3×Sérsic chain keep SP's Sérsics entirely); it is subtracted from the data.
+    """
+
+    lens_light: tuple[LightSpec, ...]
     source: SourceModel
+    fixed_light: tuple = ()
 
     def build(self, values: Mapping[str, float]) -> LensModel:
         """Lens model of ``values``; raises :class:`UnphysicalSample` for invalid values."""
         return LensModel(
             mass=mass_profiles(values),
-            lens_light=lens_light_sets(values, self.lens_light),
+            lens_light=lens_light_components(values, self.lens_light),
+            fixed_light=self.fixed_light,
             source=self.source.build(values),
         )
 
     def describe(self) -> dict:
         """Structure of the model for result files."""
+        fixed = [{"kind": type(p).__name__.lower(), "fixed": True} for p in self.fixed_light]
         return {
-            "lens_light": [{"name": s.name, "n_gaussians": s.sigmas.size} for s in self.lens_light],
+            "lens_light": [s.describe() for s in self.lens_light] + fixed,
             "source": self.source.describe(),
         }
 
@@ -466,10 +526,11 @@ def _free(priors: Mapping[str, Prior]) -> list[Parameter]:
 
 
 def sp_space(
-    specs: Sequence[LightSetSpec], centre: tuple[float, float] = (0.0, 0.0)
+    specs: Sequence[LightSpec], centre: tuple[float, float] = (0.0, 0.0)
 ) -> ParameterSpace:
-    """SP: MGE lens light (shared centre N(c, 0.3″), ell_comps N(0, 0.3)), SIE + shear,
-    1×20 source MGE (centre N(c, 0.3″)): 6 + 7 + 4 = 17 free parameters for 2 sets."""
+    """SP: lens light (shared centre N(c, 0.3″), ell_comps N(0, 0.3)), SIE + shear,
+    1×20 source MGE (centre N(c, 0.3″)): 6 + 7 + 4 = 17 free parameters for 2 MGE sets,
+    10 + 7 + 4 = 21 for 2 Sérsics."""
     wide = (Gaussian(centre[0], 0.3), Gaussian(centre[1], 0.3))
     light = lens_light_parameters(specs, wide, ELL_COMPS_PRIOR)
     source = _geometry(f"{SOURCE}.set_0", wide, (ELL_COMPS_PRIOR,) * 2)
@@ -505,17 +566,24 @@ def spix2_space(sp: PhaseResult, spix1: PhaseResult) -> ParameterSpace:
 
 
 def light_centre(result: PhaseResult) -> tuple[float, float]:
-    """Max-likelihood centre of the extended lens-light sets of ``result``."""
+    """Max-likelihood centre of the first lens-light component of ``result`` (the shared
+    centre of the extended MGE sets or of the Sérsics)."""
     values = result.max_likelihood
-    return values["lens_light.set_0.centre_x"], values["lens_light.set_0.centre_y"]
+    first = next(
+        n[: -len(".centre_x")]
+        for n in result.space.names
+        if n.startswith(LENS_LIGHT + ".") and n.endswith(".centre_x")
+    )
+    return values[f"{first}.centre_x"], values[f"{first}.centre_y"]
 
 
 def light_space(
-    specs: Sequence[LightSetSpec], sp: PhaseResult, spix1: PhaseResult, spix2: PhaseResult
+    specs: Sequence[LightSpec], sp: PhaseResult, spix1: PhaseResult, spix2: PhaseResult
 ) -> ParameterSpace:
-    """LIGHT: MGE refit with centres U(c_SP ± 0.1″), extended ell_comps U(−0.7, 0.7),
+    """LIGHT: refit with centres U(c_SP ± 0.1″), extended ell_comps U(−0.7, 0.7),
     point-set ell_comps N(0, 0.3) on [−1, 1]; mass fixed (SPix1), source fixed (SPix2):
-    2 + 2 N_sets (+ 4 with the point set) free parameters."""
+    2 + 2 N_sets (+ 4 with the point set) free parameters for the MGE, 2 + 4 N for N
+    Sérsics (R_e U(0, 30″), n U(0.8, 5))."""
     cx, cy = light_centre(sp)
     h = LIGHT_PHASE_CENTRE_HALF_WIDTH
     centre = (Uniform(cx - h, cx + h), Uniform(cy - h, cy + h))
@@ -531,17 +599,41 @@ def light_space(
     )
 
 
+def passed_component(previous: PhaseResult, component: str, rule: str = "paper") -> list[Parameter]:
+    """Parameters of ``component`` with priors passed from ``previous`` (SPEC §8.2); its
+    fixed values and ties are kept."""
+    own = [p for p in previous.space.parameters if p.name.startswith(component + ".")]
+    priors = passed_priors(previous, [p.name for p in own if p.prior is not None], rule)
+    return [
+        Parameter(p.name, prior=priors[p.name], limits=p.limits) if p.name in priors else p
+        for p in own
+    ]
+
+
 def mass_space(
-    light: PhaseResult, spix1: PhaseResult, spix2: PhaseResult, rule: str = "paper"
+    light: PhaseResult,
+    spix1: PhaseResult,
+    spix2: PhaseResult,
+    rule: str = "paper",
+    free_lens_light: bool = False,
 ) -> ParameterSpace:
     """MASS: lens light fixed (LIGHT), EPL + shear with centre, ell_comps, θ_E and shear
-    passed from SPix1 and γ U(1.5, 3.0), source fixed (SPix2): 8 free parameters."""
+    passed from SPix1 and γ U(1.5, 3.0), source fixed (SPix2): 8 free parameters.
+
+    With ``free_lens_light`` (the 3×Sérsic chain) the lens light is fitted together with
+    the mass, its priors passed from LIGHT: 8 + 14 free parameters for 3 Sérsics.
+    """
     passed = passed_priors(spix1, PASSED_MASS_NAMES, rule)
     mass = {n: p for n, p in passed.items() if n.startswith(MASS + ".")}
     shear = {n: p for n, p in passed.items() if n.startswith(SHEAR + ".")}
+    lens_light = (
+        passed_component(light, LENS_LIGHT, rule)
+        if free_lens_light
+        else frozen_component(light, LENS_LIGHT)
+    )
     return ParameterSpace(
         (
-            *frozen_component(light, LENS_LIGHT),
+            *lens_light,
             *_free({**mass, "mass.slope": SLOPE_PRIOR, **shear}),
             *frozen_component(spix2, MESH),
             *frozen_component(spix2, REGULARIZATION),

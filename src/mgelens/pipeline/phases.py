@@ -7,9 +7,9 @@ one phase folder out.
 
 * ``result.json`` and ``samples.csv`` (:class:`~mgelens.search.results.PhaseResult`), with
   an extra ``max_likelihood_fit`` block in ``result.json``: the maximum-likelihood model
-  with its solved MGE intensities, mass profiles and source hyper-parameters, enough to
-  rebuild the lens light (:func:`lens_light_model`) and the mass (:func:`mass_model`) from
-  the JSON alone;
+  with its lens-light components (MGE sets or Sérsics) and their solved intensities, mass
+  profiles and source hyper-parameters, enough to rebuild the lens light
+  (:func:`lens_light_profiles`) and the mass (:func:`mass_model`) from the JSON alone;
 * ``model.fits`` (:mod:`mgelens.pipeline.products`); SPix1 also writes
   ``adapt_image.fits``, its lensed-source model, which SPix2, LIGHT and MASS use;
 * ``phase.log`` (appended to on every run) and, while sampling, the sampler's checkpoint
@@ -28,7 +28,9 @@ re-converge in the source plane a penalty instead of a fit (SPEC §12.21).
 Chain (SPEC §8.1): SP (MGE lens light, SIE + shear, MGE source) → SPix1 (lens light fixed,
 SIE + shear passed, overlay mesh) → SPix2 (lens light and mass fixed, k-means mesh
 hyper-parameters) → LIGHT (MGE refit, mass and source fixed) → MASS (lens light and source
-fixed, EPL + shear).
+fixed, EPL + shear). With ``lens_light_model: sersic`` the lens light is the paper's
+3×Sérsic comparison instead: 2 Sérsics in SP, SP's Sérsics subtracted as fixed light in
+SPix1 and SPix2, 3 Sérsics in LIGHT, Sérsics and EPL + shear together in MASS.
 """
 
 import contextlib
@@ -49,7 +51,7 @@ from mgelens.fit import FitDataset, FitResult, FitSettings, MGESource, figure_of
 from mgelens.geometry import axis_ratio_and_angle_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
-from mgelens.light import MGESet
+from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
 from mgelens.pipeline import models, products
 from mgelens.pipeline.settings import PHASES, SlamSettings
@@ -108,11 +110,31 @@ class EarlierPhase:
         return [self.folder / RESULT_FILE, self.folder / SAMPLES_FILE]
 
     @property
-    def lens_light_specs(self) -> tuple[models.LightSetSpec, ...]:
+    def lens_light_kind(self) -> str:
+        """ "mge" or "sersic": the kind of the phase's lens light."""
+        components = self.record["lens_light"]["components"]
+        return "sersic" if any(c["kind"] == "sersic" for c in components) else "mge"
+
+    @property
+    def lens_light_specs(self) -> tuple[models.LightSpec, ...]:
+        """Specs of the phase's linear (solved) lens light."""
         return tuple(
-            models.LightSetSpec(s["name"], np.asarray(s["sigmas"], dtype=float))
-            for s in self.record["lens_light"]["sets"]
+            models.SersicSpec(c["name"])
+            if c["kind"] == "sersic"
+            else models.LightSetSpec(c["name"], np.asarray(c["sigmas"], dtype=float))
+            for c in self.record["lens_light"]["components"]
+            if not c.get("fixed", False)
         )
+
+    def check_lens_light(self, settings: SlamSettings) -> None:
+        """Raise :class:`PhaseInputError` unless the phase used the settings' lens light."""
+        if self.lens_light_kind != settings.lens_light_model:
+            raise PhaseInputError(
+                f"{self.folder / RESULT_FILE} was fitted with lens_light_model = "
+                f"{self.lens_light_kind!r} but the settings ask for "
+                f"{settings.lens_light_model!r}: rerun phase {self.folder.name!r} (and the "
+                "phases after it) with these settings"
+            )
 
 
 def read_phase(results_dir: str | Path, name: str) -> EarlierPhase:
@@ -269,30 +291,49 @@ def _mass_record(profile) -> dict:
     return {"type": type(profile).__name__, "parameters": dataclasses.asdict(profile)}
 
 
+def _light_record(component, intensities: np.ndarray) -> dict:
+    q, angle = axis_ratio_and_angle_from(component.ell_comps)
+    geometry = {
+        "centre": list(component.centre),
+        "ell_comps": list(component.ell_comps),
+        "axis_ratio": q,
+        "angle": angle,
+    }
+    if isinstance(component, Sersic):
+        return {
+            "kind": "sersic",
+            **geometry,
+            "effective_radius": component.effective_radius,
+            "sersic_index": component.sersic_index,
+            "intensity": float(intensities[0]),
+        }
+    return {
+        "kind": "mge",
+        **geometry,
+        "sigmas": component.sigmas.tolist(),
+        "intensities": intensities.tolist(),
+    }
+
+
 def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dict:
     """The ``max_likelihood_fit`` block of ``result.json``.
 
-    Lens-light sets with centre (arcsec), ell_comps, axis ratio, angle (degrees CCW from
-    +x), σ (minor-axis, arcsec) and solved intensities I₀ (data units per pixel); mass
-    profiles; source description with its hyper-parameters (and, for the SP source MGE,
-    its solved intensities); figures of merit.
+    Lens-light components, each with its name, ``kind`` ("mge" or "sersic"), centre
+    (arcsec), ell_comps, axis ratio, angle (degrees CCW from +x) and, for an MGE set, σ
+    (minor-axis, arcsec) and solved intensities I₀ (data units per pixel), for a Sérsic
+    R_e (arcsec), n and I_e (data units per pixel; ``fixed`` if an earlier phase set it);
+    mass profiles; source description with its hyper-parameters (and, for the SP source
+    MGE, its solved intensities); figures of merit.
     """
-    sets, start = [], 0
+    components, start = [], 0
     intensities = result.lens_light_intensities
-    for spec, mge in zip(model.lens_light, result.model.lens_light, strict=True):
-        q, angle = axis_ratio_and_angle_from(mge.ell_comps)
-        sets.append(
-            {
-                "name": spec.name,
-                "centre": list(mge.centre),
-                "ell_comps": list(mge.ell_comps),
-                "axis_ratio": q,
-                "angle": angle,
-                "sigmas": spec.sigmas.tolist(),
-                "intensities": intensities[start : start + mge.n_gaussians].tolist(),
-            }
-        )
-        start += mge.n_gaussians
+    for spec, component in zip(model.lens_light, result.model.lens_light, strict=True):
+        solved = intensities[start : start + component.n_columns]
+        components.append({"name": spec.name, **_light_record(component, solved)})
+        start += component.n_columns
+    for k, profile in enumerate(result.model.fixed_light):
+        record = _light_record(profile, np.array([profile.intensity]))
+        components.append({"name": f"{record['kind']}_{k}", **record, "fixed": True})
     source = model.source.describe()
     source["parameters"] = {
         k: v for k, v in values.items() if k.split(".")[0] in ("source", "mesh", "regularization")
@@ -306,7 +347,7 @@ def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dic
         "n_image_pixels": int(result.dataset.data.size),
         "positive_only": result.solution.positive_only,
         "n_active_zero": int(result.solution.active_zero.sum()),
-        "lens_light": {"kind": "mge", "sets": sets},
+        "lens_light": {"components": components},
         "mass": [_mass_record(p) for p in result.model.mass],
         "source": source,
     }
@@ -423,10 +464,14 @@ def positions_penalty(sp: EarlierPhase, settings: SlamSettings) -> models.Positi
 
 # -- the five problems -------------------------------------------------------------------
 def sp_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
-    """SP: 2×30 MGE lens light, SIE + shear, 1×20 MGE source (17 parameters)."""
+    """SP: 2×30 MGE lens light (or 2 Sérsics), SIE + shear, 1×20 MGE source (17 or 21)."""
     del results_dir  # the first phase reads no earlier result
     dataset, radius = load_dataset(lens_dir, settings, settings.mask_centre)
-    specs = models.mge_specs(2, False, dataset.imaging.pixel_scale, radius)
+    specs = (
+        models.sersic_specs(2)
+        if settings.lens_light_model == "sersic"
+        else models.mge_specs(2, False, dataset.imaging.pixel_scale, radius)
+    )
     return PhaseProblem(
         "sp",
         dataset,
@@ -437,9 +482,18 @@ def sp_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> Pha
     )
 
 
+def sp_light_model(sp: EarlierPhase, source: models.SourceModel) -> models.PhaseModel:
+    """SPix1/SPix2 model: SP's MGE geometry with intensities re-solved, or SP's Sérsics
+    fixed entirely (intensities included, SPEC §8.1)."""
+    if sp.lens_light_kind == "sersic":
+        return models.PhaseModel((), source, fixed_light=lens_light_profiles(sp.folder))
+    return models.PhaseModel(sp.lens_light_specs, source)
+
+
 def spix1_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """SPix1: lens light fixed (SP), SIE + shear passed from SP, overlay mesh (8)."""
     sp = read_phase(results_dir, "sp")
+    sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
     x, y = overlay_centres(dataset.mask, dataset.imaging.pixel_scale, settings.overlay_shape)
     source = models.MeshSourceModel(
@@ -449,7 +503,7 @@ def spix1_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> 
         "spix1",
         dataset,
         models.spix1_space(sp.result, settings.prior_passing),
-        models.PhaseModel(sp.lens_light_specs, source),
+        sp_light_model(sp, source),
         (*_imaging_files(lens_dir), *sp.files),
         radius,
         positions_penalty(sp, settings),
@@ -481,27 +535,34 @@ def spix2_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> 
     """SPix2: lens light (SP) and mass (SPix1) fixed, k-means mesh + AdaptiveBrightnessSplit
     hyper-parameters free (5)."""
     sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
+    sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
     source, adapt_path = _kmeans_source(dataset, results_dir, settings)
     return PhaseProblem(
         "spix2",
         dataset,
         models.spix2_space(sp.result, spix1.result),
-        models.PhaseModel(sp.lens_light_specs, source),
+        sp_light_model(sp, source),
         (*_imaging_files(lens_dir), *sp.files, *spix1.files, adapt_path),
         radius,
     )
 
 
 def light_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
-    """LIGHT: MGE refit (N×30 + point set), mass (SPix1) and source (SPix2) fixed."""
+    """LIGHT: MGE refit (N×30 + point set) or 3 Sérsics, mass (SPix1) and source (SPix2)
+    fixed."""
     sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
     spix2 = read_phase(results_dir, "spix2")
+    sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
     kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
     source = kmeans.fixed(spix2.result.max_likelihood)
-    specs = models.mge_specs(
-        settings.mge_sets, settings.point_set, dataset.imaging.pixel_scale, radius
+    specs = (
+        models.sersic_specs(3)
+        if settings.lens_light_model == "sersic"
+        else models.mge_specs(
+            settings.mge_sets, settings.point_set, dataset.imaging.pixel_scale, radius
+        )
     )
     return PhaseProblem(
         "light",
@@ -514,10 +575,12 @@ def light_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> 
 
 
 def mass_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
-    """MASS: lens light (LIGHT) and source (SPix2) fixed, EPL + shear (8)."""
+    """MASS: lens light (LIGHT) and source (SPix2) fixed, EPL + shear (8); the 3×Sérsic
+    chain fits LIGHT's Sérsics together with the mass (22)."""
     sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
     spix2 = read_phase(results_dir, "spix2")
     light = read_phase(results_dir, "light")
+    light.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(light.result))
     kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
     source = kmeans.fixed(spix2.result.max_likelihood)
@@ -525,7 +588,13 @@ def mass_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> P
     return PhaseProblem(
         "mass",
         dataset,
-        models.mass_space(light.result, spix1.result, spix2.result, settings.prior_passing),
+        models.mass_space(
+            light.result,
+            spix1.result,
+            spix2.result,
+            settings.prior_passing,
+            free_lens_light=light.lens_light_kind == "sersic",
+        ),
         models.PhaseModel(light.lens_light_specs, source),
         (*_imaging_files(lens_dir), *earlier),
         radius,
@@ -593,22 +662,27 @@ def _record(result_folder: str | Path) -> dict:
     return record
 
 
-def lens_light_model(
-    result_folder: str | Path,
-) -> tuple[tuple[MGESet, ...], tuple[np.ndarray, ...]]:
-    """The maximum-likelihood MGE lens light of a phase folder, from its ``result.json``.
+def lens_light_profiles(result_folder: str | Path) -> tuple:
+    """The maximum-likelihood lens light of a phase folder, from its ``result.json``.
 
     Returns
     -------
-    sets : tuple of MGESet
-        Centre (arcsec), ell_comps and minor-axis σ (arcsec) of every set.
-    intensities : tuple of ndarray
-        Solved central intensities I₀ (data units per pixel) of each set's Gaussians;
-        the light is Σ_sets ``set.image(x, y, intensities)`` before the PSF.
+    tuple of Gaussian and Sersic
+        Every Gaussian of every MGE set and every Sérsic (fixed ones included) with its
+        solved intensity, first component first; the light before the PSF is the sum of
+        their ``image(x, y)`` (data units per pixel).
     """
-    sets = _record(result_folder)["lens_light"]["sets"]
-    mges = tuple(MGESet(tuple(s["centre"]), tuple(s["ell_comps"]), s["sigmas"]) for s in sets)
-    return mges, tuple(np.asarray(s["intensities"], dtype=float) for s in sets)
+    profiles: list = []
+    for c in _record(result_folder)["lens_light"]["components"]:
+        centre, ell_comps = tuple(c["centre"]), tuple(c["ell_comps"])
+        if c["kind"] == "sersic":
+            profiles.append(
+                Sersic(centre, ell_comps, c["effective_radius"], c["sersic_index"], c["intensity"])
+            )
+        else:
+            mge = MGESet(centre, ell_comps, c["sigmas"])
+            profiles += mge.gaussians(np.asarray(c["intensities"], dtype=float))
+    return tuple(profiles)
 
 
 def mass_model(result_folder: str | Path) -> tuple:

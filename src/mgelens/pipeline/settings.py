@@ -17,7 +17,7 @@ A YAML file may override any field under a top-level ``slam:`` key; other top-le
 
     slam:
       positive_only: false        # pn-MGE
-      mge_sets: 6
+      mge_sets: 6                 # or lens_light_model: sersic (the 3×Sérsic comparison)
       samplers:
         mass: {n_live: 80}
 """
@@ -38,6 +38,7 @@ PHASES = ("sp", "spix1", "spix2", "light", "mass")
 N_GAUSSIANS = 30
 """Gaussians per extended MGE set (paper; not a setting)."""
 
+LENS_LIGHT_MODELS = ("mge", "sersic")
 MGE_SET_CHOICES = (2, 4, 6)
 SPIX1_REGULARIZATIONS = ("constant", "constant_split")
 KMEANS_SCHEMES = ("2023", "2024")
@@ -66,6 +67,12 @@ class SlamSettings:
     positive_only : bool
         Non-negative solve of all linear unknowns ("nn-MGE", default) or unconstrained
         ("pn-MGE"), in every phase.
+    lens_light_model : {"mge", "sersic"}
+        The lens light: the MGE (paper's method) or the paper's 3×Sérsic comparison
+        (SPEC §8.1): 2 Sérsics with a shared centre in SP, fixed entirely (intensities
+        too) in SPix1 and SPix2, 3 Sérsics in LIGHT, fitted together with the EPL in MASS.
+        All Sérsic intensities are solved linearly. The paper's Sérsic runs also set
+        ``positive_only: false``.
     mge_sets : {2, 4, 6}
         Extended 30-Gaussian sets of the LIGHT phase (SP always uses 2).
     point_set : bool
@@ -103,6 +110,7 @@ class SlamSettings:
     mask_radius: float | None = None
     mask_centre: tuple[float, float] = (0.0, 0.0)
     positive_only: bool = True
+    lens_light_model: str = "mge"
     mge_sets: int = 4
     point_set: bool = True
     source_pixels: int = 1500
@@ -124,6 +132,7 @@ class SlamSettings:
     samplers: Mapping[str, SamplerSettings] = field(default_factory=dict)
 
     def __post_init__(self):
+        _check_choice("lens_light_model", self.lens_light_model, LENS_LIGHT_MODELS)
         _check_choice("mge_sets", self.mge_sets, MGE_SET_CHOICES)
         _check_choice("spix1_regularization", self.spix1_regularization, SPIX1_REGULARIZATIONS)
         _check_choice("kmeans_scheme", str(self.kmeans_scheme), KMEANS_SCHEMES)

@@ -33,9 +33,12 @@ PHYSICAL_LIMITS: dict[str, tuple[float, float]] = {
     "ell_comps_2": (-1.0, 1.0),
     "einstein_radius": (0.0, math.inf),
     "slope": (1.0, 3.0),
+    "effective_radius": (0.0, math.inf),
+    "sersic_index": (0.8, 5.0),
 }
 """Default limits by the last component of a dotted name: |e| < 1 keeps q > 0, θ_E > 0,
-and the EPL deflection needs 1 < γ < 3. Names ending in ``coefficient`` get (0, inf).
+and the EPL deflection needs 1 < γ < 3; a Sérsic has R_e > 0 and the anchor's
+0.8 ≤ n ≤ 5. Names ending in ``coefficient`` get (0, inf).
 Everything else is unbounded. Passed priors are truncated to these limits (SPEC §8.2)."""
 
 

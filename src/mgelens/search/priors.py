@@ -252,8 +252,11 @@ WIDTH_MODIFIERS: dict[str, WidthModifier] = {
     "slope": WidthModifier("absolute", 0.2),
     "gamma_1": _SHEAR,
     "gamma_2": _SHEAR,
+    "effective_radius": WidthModifier("relative", 1.0),
+    "sersic_index": WidthModifier("absolute", 1.5),
 }
-"""Width modifiers keyed by the last component of a dotted parameter name (SPEC §8.2).
+"""Width modifiers keyed by the last component of a dotted parameter name (SPEC §8.2;
+Sérsic R_e and n from the anchor's ``priors/light/linear/sersic.yaml``).
 
 Regularization coefficients (names ending in ``coefficient``) and every other parameter
 use the default, relative 0.5."""
