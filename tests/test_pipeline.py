@@ -329,6 +329,14 @@ def test_profiles_paper_and_quick():
     assert quick.positive_only
     assert quick.positions_penalty
     assert not paper.positions_penalty
+    assert (paper.psf_trim, quick.psf_trim) == (1e-10, 1e-4)
+
+
+def test_psf_trim_reaches_the_fit(mock_dir):
+    for trim in (1e-10, 1e-4):
+        settings = settings_from_mapping({"mask_radius": MASK_RADIUS, "psf_trim": trim})
+        dataset, _ = phases.load_dataset(mock_dir, settings, (0.0, 0.0))
+        assert dataset.settings.psf_trim == trim
 
 
 def test_settings_from_yaml_override_the_profile(tmp_path):

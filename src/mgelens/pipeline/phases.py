@@ -112,7 +112,7 @@ class EarlierPhase:
     @property
     def lens_light_kind(self) -> str:
         """ "mge" or "sersic": the kind of the phase's lens light."""
-        components = self.record["lens_light"]["components"]
+        components = light_components(self.record)
         return "sersic" if any(c["kind"] == "sersic" for c in components) else "mge"
 
     @property
@@ -122,7 +122,7 @@ class EarlierPhase:
             models.SersicSpec(c["name"])
             if c["kind"] == "sersic"
             else models.LightSetSpec(c["name"], np.asarray(c["sigmas"], dtype=float))
-            for c in self.record["lens_light"]["components"]
+            for c in light_components(self.record)
             if not c.get("fixed", False)
         )
 
@@ -190,6 +190,7 @@ def load_dataset(
         lp_sub_size_centre=settings.lp_sub_size_centre,
         lp_centre_radius=settings.lp_centre_radius,
         use_border=settings.use_border,
+        psf_trim=settings.psf_trim,
     )
     return FitDataset.from_imaging(imaging, mask, fit_settings, light_centre), radius
 
@@ -662,6 +663,18 @@ def _record(result_folder: str | Path) -> dict:
     return record
 
 
+def light_components(record: dict) -> list[dict]:
+    """The lens-light component entries of a ``max_likelihood_fit`` record.
+
+    Records written before the 3×Sérsic option list MGE sets under ``sets``; they are
+    read as components of kind "mge".
+    """
+    light = record["lens_light"]
+    if "components" in light:
+        return light["components"]
+    return [{"kind": "mge", **entry} for entry in light["sets"]]
+
+
 def lens_light_profiles(result_folder: str | Path) -> tuple:
     """The maximum-likelihood lens light of a phase folder, from its ``result.json``.
 
@@ -673,7 +686,7 @@ def lens_light_profiles(result_folder: str | Path) -> tuple:
         their ``image(x, y)`` (data units per pixel).
     """
     profiles: list = []
-    for c in _record(result_folder)["lens_light"]["components"]:
+    for c in light_components(_record(result_folder)):
         centre, ell_comps = tuple(c["centre"]), tuple(c["ell_comps"])
         if c["kind"] == "sersic":
             profiles.append(
