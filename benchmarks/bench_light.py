@@ -1,8 +1,10 @@
-"""MGE lens-light columns: 2×30 + 10 Gaussians, 3.0″ mask at 0.05″, over-sampled, PSF.
+"""Lens-light columns: MGE 2×30 + 10 Gaussians and 3 linear Sérsics, 3.0″ mask at 0.05″,
+over-sampled, PSF.
 
-Prints the median time of building all 70 PSF-convolved columns (target <= 0.1 s on
-2 cores), split into evaluation (over-sampled Gaussians, binned) and convolution. The PSF
-is trimmed of wings below 1e−10 of its peak, as ``FitDataset`` does.
+Prints the median time of building all 70 PSF-convolved MGE columns (target <= 0.1 s on
+2 cores), split into evaluation (over-sampled Gaussians, binned) and convolution, and of
+the 3 Sérsic columns of the 3×Sérsic comparison model. The PSF is trimmed of wings below
+1e−10 of its peak, as ``FitDataset`` does.
 """
 
 import numpy as np
@@ -12,7 +14,7 @@ from mgelens.convolve import trimmed_psf
 from mgelens.fit import FitSettings
 from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
-from mgelens.light import LightGrid, MGESet
+from mgelens.light import LightGrid, MGESet, Sersic
 
 
 def gaussian_psf(size: int) -> np.ndarray:
@@ -44,6 +46,15 @@ def main() -> None:
             f"mge_convolve_70_psf{size}_s",
             median_time(lambda g=grid, c=columns: g.convolver.blur_columns(c)),
         )
+    sersics = [
+        Sersic((0.01, -0.02), ell_comps_from(q, angle), radius_e, n)
+        for q, angle, radius_e, n in ((0.8, 30.0, 0.4, 4.0), (0.6, 50.0, 1.2, 1.5), (0.9, 10, 3, 1))
+    ]
+    report("sersic_columns_3_s", median_time(lambda g=grid: g.blurred_columns(sersics)))
+    report(
+        "sersic_evaluate_3_s",
+        median_time(lambda g=grid: [s.columns(g.grid) for s in sersics]),
+    )
     print(f"n_image_pixels: {grid.n_image_pixels}  n_sub_pixels: {grid.grid.x.size}")
     report("peak_memory_mb", peak_memory_mb(), "MB")
 
