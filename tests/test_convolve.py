@@ -1,5 +1,7 @@
+import numba
 import numpy as np
 import pytest
+import scipy.fft
 from scipy import signal
 
 from mgelens.convolve import Convolver, convolve_image, trimmed_psf
@@ -61,6 +63,31 @@ def test_blur_columns_equals_masked_native_convolution(asymmetric_psf, include_b
         assert np.allclose(out[:, k], expected, atol=1e-13)
     single = conv.blur_columns(columns[:, 0], include_blurring, method)
     assert np.allclose(single, out[:, 0], atol=1e-14)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_fft_blurring_runs_on_the_jobs_threads(asymmetric_psf, monkeypatch, threads):
+    """scipy.fft gets numba's thread count as its workers: a one-thread phase job must not
+    spread its FFTs over every core (two such jobs side by side then slowed each other)."""
+    workers = []
+    forward = scipy.fft.rfft2
+
+    def spy(*args, **kwargs):
+        workers.append(kwargs.get("workers"))  # None: the kernel's own FFT, made once
+        return forward(*args, **kwargs)
+
+    monkeypatch.setattr(scipy.fft, "rfft2", spy)
+    x, y = pixel_centres((31, 29), 0.1)
+    conv = Convolver(np.hypot(x, y) > 1.1, asymmetric_psf)
+    columns = np.ones((np.count_nonzero(~conv.input_mask(True)), 3))
+    previous = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        conv.blur_columns(columns, True, "fft")
+    finally:
+        numba.set_num_threads(previous)
+    assert workers[-1] == min(threads, numba.config.NUMBA_NUM_THREADS)
+    assert set(workers[:-1]) <= {None}
 
 
 def test_blurring_region_lets_outside_light_in(asymmetric_psf):

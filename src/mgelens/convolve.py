@@ -12,13 +12,12 @@ many dense columns). ``method="auto"`` picks the cheaper by an operation count.
 from dataclasses import dataclass, field
 from functools import cached_property
 
+import numba
 import numpy as np
 import scipy.fft
 from scipy import signal, sparse
 
 from mgelens.grid import blurring_mask
-
-FFT_WORKERS = -1  # scipy.fft worker threads: all cores the process may use
 
 
 def check_psf(psf: np.ndarray) -> np.ndarray:
@@ -202,8 +201,9 @@ class Convolver:
         stack = np.zeros((n_col, r1 - r0, c1 - c0))
         rows, cols = np.nonzero(~in_mask)
         stack[:, rows - r0, cols - c0] = columns.T
-        spectrum = scipy.fft.rfft2(stack, s=shape, workers=FFT_WORKERS)
+        workers = numba.get_num_threads()  # the job's threads (mgelens.threads policy)
+        spectrum = scipy.fft.rfft2(stack, s=shape, workers=workers)
         spectrum *= kernel_fft[None]
-        full = scipy.fft.irfft2(spectrum, s=shape, workers=FFT_WORKERS)
+        full = scipy.fft.irfft2(spectrum, s=shape, workers=workers)
         out_rows, out_cols = np.nonzero(~self.mask)
         return full[:, out_rows - r0 + ky // 2, out_cols - c0 + kx // 2].T
