@@ -94,6 +94,21 @@ class Gaussian:
         return 2.0 * np.pi * self.sigma**2 * self.intensity / self.axis_ratio / pixel_scale**2
 
 
+def _kernel_geometry(grid: SubGrid, centre, ell_comps) -> tuple:
+    """Leading arguments of the column kernels: sub-grid arrays, centre, q, φ (radians)."""
+    q, angle = axis_ratio_and_angle_from(ell_comps)
+    return (
+        grid.x,
+        grid.y,
+        grid.starts,
+        grid.sub_sizes,
+        float(centre[0]),
+        float(centre[1]),
+        float(q),
+        float(np.deg2rad(angle)),
+    )
+
+
 def sersic_constant(sersic_index: float) -> float:
     """b_n of Ciotti & Bertin (1999), the asymptotic series used by the anchor (SPEC §2.3)."""
     n = sersic_index
@@ -148,16 +163,8 @@ class Sersic:
 
         ``intensity`` is ignored: as a linear profile its I_e is solved (SPEC §2.3).
         """
-        q, angle = axis_ratio_and_angle_from(self.ell_comps)
         column = _sersic_column(
-            grid.x,
-            grid.y,
-            grid.starts,
-            grid.sub_sizes,
-            float(self.centre[0]),
-            float(self.centre[1]),
-            float(q),
-            float(np.deg2rad(angle)),
+            *_kernel_geometry(grid, self.centre, self.ell_comps),
             float(np.log(self.effective_radius)),
             1.0 / self.sersic_index,
             sersic_constant(self.sersic_index),
@@ -255,16 +262,8 @@ class MGESet:
 
     def columns(self, grid: SubGrid) -> np.ndarray:
         """Unit-intensity images binned over ``grid``: (n_pixels, N_g), before the PSF."""
-        q, angle = axis_ratio_and_angle_from(self.ell_comps)
         return _gaussian_columns(
-            grid.x,
-            grid.y,
-            grid.starts,
-            grid.sub_sizes,
-            float(self.centre[0]),
-            float(self.centre[1]),
-            float(q),
-            float(np.deg2rad(angle)),
+            *_kernel_geometry(grid, self.centre, self.ell_comps),
             1.0 / (2.0 * self.sigmas**2),
         )
 

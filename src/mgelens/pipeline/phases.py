@@ -487,7 +487,7 @@ def sp_light_model(sp: EarlierPhase, source: models.SourceModel) -> models.Phase
     """SPix1/SPix2 model: SP's MGE geometry with intensities re-solved, or SP's Sérsics
     fixed entirely (intensities included, SPEC §8.1)."""
     if sp.lens_light_kind == "sersic":
-        return models.PhaseModel((), source, fixed_light=lens_light_profiles(sp.folder))
+        return models.PhaseModel((), source, fixed_light=profiles_from_record(sp.record))
     return models.PhaseModel(sp.lens_light_specs, source)
 
 
@@ -675,6 +675,22 @@ def light_components(record: dict) -> list[dict]:
     return [{"kind": "mge", **entry} for entry in light["sets"]]
 
 
+def profiles_from_record(record: dict) -> tuple:
+    """Lens-light profiles with their intensities from a ``max_likelihood_fit`` record
+    (see :func:`lens_light_profiles`)."""
+    profiles: list = []
+    for c in light_components(record):
+        centre, ell_comps = tuple(c["centre"]), tuple(c["ell_comps"])
+        if c["kind"] == "sersic":
+            profiles.append(
+                Sersic(centre, ell_comps, c["effective_radius"], c["sersic_index"], c["intensity"])
+            )
+        else:
+            mge = MGESet(centre, ell_comps, c["sigmas"])
+            profiles += mge.gaussians(np.asarray(c["intensities"], dtype=float))
+    return tuple(profiles)
+
+
 def lens_light_profiles(result_folder: str | Path) -> tuple:
     """The maximum-likelihood lens light of a phase folder, from its ``result.json``.
 
@@ -685,17 +701,7 @@ def lens_light_profiles(result_folder: str | Path) -> tuple:
         solved intensity, first component first; the light before the PSF is the sum of
         their ``image(x, y)`` (data units per pixel).
     """
-    profiles: list = []
-    for c in light_components(_record(result_folder)):
-        centre, ell_comps = tuple(c["centre"]), tuple(c["ell_comps"])
-        if c["kind"] == "sersic":
-            profiles.append(
-                Sersic(centre, ell_comps, c["effective_radius"], c["sersic_index"], c["intensity"])
-            )
-        else:
-            mge = MGESet(centre, ell_comps, c["sigmas"])
-            profiles += mge.gaussians(np.asarray(c["intensities"], dtype=float))
-    return tuple(profiles)
+    return profiles_from_record(_record(result_folder))
 
 
 def mass_model(result_folder: str | Path) -> tuple:
