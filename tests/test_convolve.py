@@ -4,7 +4,7 @@ import pytest
 import scipy.fft
 from scipy import signal
 
-from mgelens.convolve import Convolver, convolve_image, trimmed_psf
+from mgelens.convolve import Convolver, convolve_image, separable_terms, trimmed_psf
 from mgelens.grid import pixel_centres
 
 
@@ -47,7 +47,7 @@ def test_convolution_moves_light_the_right_way():
 
 
 @pytest.mark.parametrize("include_blurring", [True, False])
-@pytest.mark.parametrize("method", ["direct", "fft"])
+@pytest.mark.parametrize("method", ["direct", "fft", "separable"])
 def test_blur_columns_equals_masked_native_convolution(asymmetric_psf, include_blurring, method):
     x, y = pixel_centres((31, 29), 0.1)
     mask = np.hypot(x - 0.2, y) > 1.1
@@ -88,6 +88,36 @@ def test_fft_blurring_runs_on_the_jobs_threads(asymmetric_psf, monkeypatch, thre
         numba.set_num_threads(previous)
     assert workers[-1] == min(threads, numba.config.NUMBA_NUM_THREADS)
     assert set(workers[:-1]) <= {None}
+
+
+def gaussian_psf(size: int, sigma: float, q: float = 1.0) -> np.ndarray:
+    x, y = pixel_centres((size, size), 1.0)
+    psf = np.exp(-0.5 * (x**2 + (y / q) ** 2) / sigma**2)
+    return psf / psf.sum()
+
+
+def test_separable_terms_rebuild_the_kernel_with_the_fewest_terms(asymmetric_psf):
+    u, v = separable_terms(gaussian_psf(9, 1.0, q=0.7))
+    assert u.shape == (1, 9)  # an axis-aligned Gaussian is rank one
+    assert v.shape == (1, 9)
+    u, v = separable_terms(asymmetric_psf)
+    assert u.shape == (3, 5)  # a random kernel needs every term
+    assert v.shape == (3, 3)
+    assert np.abs(u.T @ v - asymmetric_psf).max() <= 1e-12 * asymmetric_psf.max()
+    two_widths = gaussian_psf(11, 1.0) + 0.3 * gaussian_psf(11, 2.5, q=0.8)
+    u, v = separable_terms(two_widths)
+    assert u.shape[0] == 2  # two axis-aligned Gaussians: two terms
+    assert np.abs(u.T @ v - two_widths).max() <= 1e-12 * two_widths.max()
+
+
+def test_auto_blurs_a_gaussian_psf_separably_and_a_full_rank_one_otherwise(asymmetric_psf):
+    x, y = pixel_centres((61, 61), 0.05)
+    mask = np.hypot(x, y) > 1.2
+    gaussian = Convolver(mask, gaussian_psf(9, 1.0))
+    n_in = np.count_nonzero(~gaussian.extended_mask)
+    assert gaussian._method_for(n_in, "auto") == "separable"
+    full_rank = np.random.default_rng(3).random((9, 9))
+    assert Convolver(mask, full_rank / full_rank.sum())._method_for(n_in, "auto") != "separable"
 
 
 def test_blurring_region_lets_outside_light_in(asymmetric_psf):
