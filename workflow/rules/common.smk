@@ -197,5 +197,11 @@ def phase_options(wildcards) -> str:
     )
 
 
+def phase_priority(wildcards) -> int:
+    """Earlier phases first (SP highest): with more lenses than cores, every lens's SP, the
+    longest phase, starts before any chain's later phases, so no late SP sets the tail."""
+    return len(PHASES) - PHASES.index(wildcards.phase)
+
+
 def phase_mem_mb(wildcards, attempt) -> int:
     return 4000 * attempt

@@ -24,6 +24,7 @@ rule phase:
         options=phase_options,
         slam=SLAM_SETTINGS,
     threads: 1
+    priority: phase_priority
     resources:
         mem_mb=phase_mem_mb,
         runtime=600,
