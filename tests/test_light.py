@@ -160,3 +160,16 @@ def test_bad_light_parameters_raise():
         Sersic(sersic_index=20.0)
     with pytest.raises(ValueError, match="sigma_min"):
         log_spaced_sigmas(0.5, 0.1, 10)
+
+
+def test_vectorised_exponential_matches_numpy_over_the_kernels_range():
+    """The Gaussian kernel's own exp(−e) (table × Taylor, so the loop vectorises) equals
+    numpy's from 0 to the cut-off, including the table's step edges, to a few ulp of the
+    argument's own conditioning (a rounding of e changes exp(−e) by e·2⁻⁵² relative)."""
+    from mgelens.light import _EXP_STEPS, _EXP_TABLE, EXPONENT_CUTOFF, _exp_negative
+
+    steps = np.arange(int(EXPONENT_CUTOFF * _EXP_STEPS / np.log(2.0))) * np.log(2.0) / _EXP_STEPS
+    e = np.concatenate([np.linspace(0.0, EXPONENT_CUTOFF, 200_001), steps, steps[1:] - 1e-13])
+    e = e[::50]
+    ours = np.array([_exp_negative(v, _EXP_TABLE) for v in e])
+    assert np.all(np.abs(ours / np.exp(-e) - 1.0) <= 3e-16 * (1.0 + e))
