@@ -26,6 +26,9 @@ rule simulate_mock:
         image_size=config["mock"]["image_size"],
         sub_size=config["mock"]["sub_size"],
     threads: 2
+    # before any phase: a two-thread job never fits beside the one-thread phase jobs that
+    # keep a core busy, so without this the other lenses' mocks wait for a whole chain
+    priority: len(PHASES) + 1
     resources:
         mem_mb=simulate_mem_mb,
         runtime=10,
