@@ -72,7 +72,7 @@ def test_dry_run_of_one_lens_slam_chain_runs_five_phases(tmp_path):
     # the config's slam: section as JSON
     assert "--mask-radius 1.6 --mge-sets 4 --point-set yes" in output
     assert """--slam '{"profile": "quick"}'""" in output
-    # mocks first (a two-thread job would otherwise wait behind one-thread phases), then
+    # mocks first (a lens cannot start without its mock), then
     # earlier phases first (SP highest), so every lens's SP starts early
     priorities = dict(re.findall(r"phase=(\w+)\n\s+priority: (\d+)", output))
     assert priorities == {"sp": "5", "spix1": "4", "spix2": "3", "light": "2", "mass": "1"}

@@ -25,9 +25,10 @@ rule simulate_mock:
         folder=mock_folder,
         image_size=config["mock"]["image_size"],
         sub_size=config["mock"]["sub_size"],
-    threads: 2
-    # before any phase: a two-thread job never fits beside the one-thread phase jobs that
-    # keep a core busy, so without this the other lenses' mocks wait for a whole chain
+    # one thread (a mock takes ~5 s) and before any phase: a two-thread job never fits
+    # beside the one-thread phase jobs that keep the cores busy, so a lens's mock would
+    # wait for other lenses' chains
+    threads: 1
     priority: len(PHASES) + 1
     resources:
         mem_mb=simulate_mem_mb,
