@@ -33,13 +33,26 @@ def test_mapping_matrix_averages_sub_pixel_weights():
     assert np.allclose(f, expected)
 
 
+def gaussian_kernel(shape, sigma_y, sigma_x):
+    y, x = np.mgrid[: shape[0], : shape[1]] - np.array(shape)[:, None, None] // 2
+    return np.exp(-0.5 * ((x / sigma_x) ** 2 + (y / sigma_y) ** 2))
+
+
 @pytest.mark.parametrize("tile_size", [1, 3, 8])
-def test_curvature_and_data_vector_equal_dense_products(tile_size):
+@pytest.mark.parametrize("kernel", ["random", "gaussian", "two_gaussians"])
+def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
+    """Rows of G built directly (random kernel, full rank) or by row and column passes
+    (one or two separable terms) give the same F = Mᵀ W M as dense products."""
     rng = np.random.default_rng(4)
     x, y = pixel_centres((23, 21), 0.1)
     mask = np.hypot(x - 0.1, y) > 0.95
     n_pixels = np.count_nonzero(~mask)
-    psf = rng.random((5, 3))
+    psf = {
+        "random": rng.random((5, 3)),
+        "gaussian": gaussian_kernel((7, 5), 1.3, 0.9),
+        "two_gaussians": gaussian_kernel((9, 9), 1.0, 1.0)
+        + 0.2 * gaussian_kernel((9, 9), 2.5, 1.5),
+    }[kernel]
     psf /= psf.sum()
     convolver = Convolver(mask, psf)
     weights, _ = random_weights(rng, n_pixels, 30)
@@ -55,6 +68,7 @@ def test_curvature_and_data_vector_equal_dense_products(tile_size):
     data = rng.normal(size=n_pixels)
     full = np.hstack([dense, blurred])
     plan = TilePlan.from_mask(mask, psf, tile_size)
+    assert plan.psf_u.shape[0] == {"random": 0, "gaussian": 1, "two_gaussians": 2}[kernel]
     operator = convolver.operator(include_blurring=False)
     curvature = curvature_matrix(dense, f, plan, inverse_variance)
     expected = full.T @ (inverse_variance[:, None] * full)

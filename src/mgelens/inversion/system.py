@@ -25,6 +25,7 @@ from numba import prange
 from scipy import sparse
 
 from mgelens._jit import njit
+from mgelens.convolve import separable_terms
 from mgelens.threads import single_threaded_blas
 
 TILE_SIZE = 8
@@ -46,6 +47,10 @@ class TilePlan:
         Slim indices of the pixels, grouped by tile.
     rows, cols : ndarray of int
         Native row and column of ``tile_pixels``.
+    psf_u, psf_v : ndarray (r, k_y), (r, k_x)
+        Singular-value terms of the PSF (:func:`mgelens.convolve.separable_terms`) when
+        r (k_x + k_y) is less than k_x k_y, so that rows of G are built with a row pass
+        and a column pass (a Gaussian PSF: r = 1); empty (r = 0) otherwise.
     """
 
     psf: np.ndarray
@@ -54,6 +59,8 @@ class TilePlan:
     tile_pixels: np.ndarray
     rows: np.ndarray
     cols: np.ndarray
+    psf_u: np.ndarray
+    psf_v: np.ndarray
 
     @classmethod
     def from_mask(cls, mask: np.ndarray, psf: np.ndarray, tile_size: int = TILE_SIZE):
@@ -65,6 +72,9 @@ class TilePlan:
         order = np.argsort(tile_id, kind="stable")
         _, counts = np.unique(tile_id[order], return_counts=True)
         indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        u, v = separable_terms(psf)
+        if u.shape[0] * sum(psf.shape) >= psf.size:
+            u, v = np.zeros((0, psf.shape[0])), np.zeros((0, psf.shape[1]))
         return cls(
             psf=np.ascontiguousarray(psf, dtype=float),
             slim_index=slim_index,
@@ -72,6 +82,8 @@ class TilePlan:
             tile_pixels=slim_index[rows[order], cols[order]],
             rows=rows[order].astype(np.int64),
             cols=cols[order].astype(np.int64),
+            psf_u=u,
+            psf_v=v,
         )
 
 
@@ -111,6 +123,8 @@ def curvature_matrix(
                 plan.cols,
                 plan.slim_index,
                 plan.psf,
+                plan.psf_u,
+                plan.psf_v,
                 mapping.indptr.astype(np.int64),
                 mapping.indices.astype(np.int64),
                 mapping.data,
@@ -125,6 +139,45 @@ def curvature_matrix(
     return f
 
 
+@njit
+def _separable_rows(
+    g, rows, cols, slim_index, psf_u, psf_v, f_indptr, f_indices, f_values, position, n_union
+):
+    """Rows of G = B f for the pixels (rows, cols) of one tile, into ``g`` (n_out, n_union),
+    with B = Σ_k u_k v_kᵀ: per term a row pass h[r, c] = Σ_b v_k[b] f[(r, c − b + h_x)]
+    over the tile's columns and its rows ± h_y (a sparse scatter), then a dense column pass
+    g[i] += Σ_a u_k[a] h[r_i − a + h_y, c_i]. ``position`` maps source pixels to g's
+    columns."""
+    n_y, n_x = slim_index.shape
+    k_y, k_x = psf_u.shape[1], psf_v.shape[1]
+    h_y, h_x = k_y // 2, k_x // 2
+    r_lo, r_hi = rows.min() - h_y, rows.max() + h_y
+    c_lo, c_hi = cols.min(), cols.max()
+    n_r, n_c = r_hi - r_lo + 1, c_hi - c_lo + 1
+    h = np.empty((n_r, n_c, n_union))
+    for term in range(psf_u.shape[0]):
+        h[:] = 0.0
+        for r in range(max(r_lo, 0), min(r_hi + 1, n_y)):
+            for c in range(n_c):
+                for kb in range(k_x):
+                    cc = c + c_lo - kb + h_x
+                    if cc < 0 or cc >= n_x:
+                        continue
+                    k = slim_index[r, cc]
+                    if k < 0:
+                        continue
+                    weight = psf_v[term, kb]
+                    for p in range(f_indptr[k], f_indptr[k + 1]):
+                        h[r - r_lo, c, position[f_indices[p]]] += weight * f_values[p]
+        for i in range(rows.size):
+            c = cols[i] - c_lo
+            for ka in range(k_y):
+                weight = psf_u[term, ka]
+                row = h[rows[i] - ka + h_y - r_lo, c]
+                for x in range(n_union):
+                    g[i, x] += weight * row[x]
+
+
 @njit(parallel=True)
 def _tile_curvature(
     tile_indptr,
@@ -133,6 +186,8 @@ def _tile_curvature(
     cols,
     slim_index,
     psf,
+    psf_u,
+    psf_v,
     f_indptr,
     f_indices,
     f_values,
@@ -178,22 +233,37 @@ def _tile_curvature(
                 position[union[x]] = x
             n_out = end - start
             g = np.zeros((n_out, n_union))
-            for i in range(n_out):
-                r0, c0 = rows[start + i], cols[start + i]
-                for ka in range(k_y):
-                    r = r0 - ka + h_y
-                    if r < 0 or r >= n_y:
-                        continue
-                    for kb in range(k_x):
-                        cc = c0 - kb + h_x
-                        if cc < 0 or cc >= n_x:
+            if psf_u.shape[0] > 0:
+                _separable_rows(
+                    g,
+                    rows[start:end],
+                    cols[start:end],
+                    slim_index,
+                    psf_u,
+                    psf_v,
+                    f_indptr,
+                    f_indices,
+                    f_values,
+                    position,
+                    n_union,
+                )
+            else:
+                for i in range(n_out):
+                    r0, c0 = rows[start + i], cols[start + i]
+                    for ka in range(k_y):
+                        r = r0 - ka + h_y
+                        if r < 0 or r >= n_y:
                             continue
-                        k = slim_index[r, cc]
-                        if k < 0:
-                            continue
-                        weight = psf[ka, kb]
-                        for p in range(f_indptr[k], f_indptr[k + 1]):
-                            g[i, position[f_indices[p]]] += weight * f_values[p]
+                        for kb in range(k_x):
+                            cc = c0 - kb + h_x
+                            if cc < 0 or cc >= n_x:
+                                continue
+                            k = slim_index[r, cc]
+                            if k < 0:
+                                continue
+                            weight = psf[ka, kb]
+                            for p in range(f_indptr[k], f_indptr[k + 1]):
+                                g[i, position[f_indices[p]]] += weight * f_values[p]
             # numba's np.dot reaches BLAS only for C-contiguous operands: build gᵀ explicitly
             g_t = np.empty((n_union, n_out))
             wg = np.empty_like(g)
