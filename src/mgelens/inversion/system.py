@@ -139,6 +139,34 @@ def curvature_matrix(
     return f
 
 
+@njit(inline="always")
+def _add_mapping_row(out, k, weight, f_indptr, f_indices, f_values, position):
+    """out[position[j]] += weight · f[k, j] over the non-zeros of mapping row k."""
+    for p in range(f_indptr[k], f_indptr[k + 1]):
+        out[position[f_indices[p]]] += weight * f_values[p]
+
+
+@njit
+def _direct_rows(g, rows, cols, slim_index, psf, f_indptr, f_indices, f_values, position):
+    """Rows of G = B f for the pixels (rows, cols) of one tile, into ``g``, summing the
+    full kernel: g[i] += psf[a, b] f[(r_i − a + h_y, c_i − b + h_x)]."""
+    n_y, n_x = slim_index.shape
+    k_y, k_x = psf.shape
+    h_y, h_x = k_y // 2, k_x // 2
+    for i in range(rows.size):
+        for ka in range(k_y):
+            r = rows[i] - ka + h_y
+            if r < 0 or r >= n_y:
+                continue
+            for kb in range(k_x):
+                cc = cols[i] - kb + h_x
+                if cc < 0 or cc >= n_x or slim_index[r, cc] < 0:
+                    continue
+                _add_mapping_row(
+                    g[i], slim_index[r, cc], psf[ka, kb], f_indptr, f_indices, f_values, position
+                )
+
+
 @njit
 def _separable_rows(
     g, rows, cols, slim_index, psf_u, psf_v, f_indptr, f_indices, f_values, position, n_union
@@ -161,14 +189,17 @@ def _separable_rows(
             for c in range(n_c):
                 for kb in range(k_x):
                     cc = c + c_lo - kb + h_x
-                    if cc < 0 or cc >= n_x:
+                    if cc < 0 or cc >= n_x or slim_index[r, cc] < 0:
                         continue
-                    k = slim_index[r, cc]
-                    if k < 0:
-                        continue
-                    weight = psf_v[term, kb]
-                    for p in range(f_indptr[k], f_indptr[k + 1]):
-                        h[r - r_lo, c, position[f_indices[p]]] += weight * f_values[p]
+                    _add_mapping_row(
+                        h[r - r_lo, c],
+                        slim_index[r, cc],
+                        psf_v[term, kb],
+                        f_indptr,
+                        f_indices,
+                        f_values,
+                        position,
+                    )
         for i in range(rows.size):
             c = cols[i] - c_lo
             for ka in range(k_y):
@@ -248,22 +279,17 @@ def _tile_curvature(
                     n_union,
                 )
             else:
-                for i in range(n_out):
-                    r0, c0 = rows[start + i], cols[start + i]
-                    for ka in range(k_y):
-                        r = r0 - ka + h_y
-                        if r < 0 or r >= n_y:
-                            continue
-                        for kb in range(k_x):
-                            cc = c0 - kb + h_x
-                            if cc < 0 or cc >= n_x:
-                                continue
-                            k = slim_index[r, cc]
-                            if k < 0:
-                                continue
-                            weight = psf[ka, kb]
-                            for p in range(f_indptr[k], f_indptr[k + 1]):
-                                g[i, position[f_indices[p]]] += weight * f_values[p]
+                _direct_rows(
+                    g,
+                    rows[start:end],
+                    cols[start:end],
+                    slim_index,
+                    psf,
+                    f_indptr,
+                    f_indices,
+                    f_values,
+                    position,
+                )
             # numba's np.dot reaches BLAS only for C-contiguous operands: build gᵀ explicitly
             g_t = np.empty((n_union, n_out))
             wg = np.empty_like(g)
