@@ -155,8 +155,15 @@ def test_parametric_source_joins_the_linear_system():
     model = LensModel(mass=MASS, lens_light=sets, source=MGESource(source_sets))
     result = fit(with_data(blank, image), model)
     assert (result.n_lens_light, result.n_source_light) == (12, 8)
-    assert np.allclose(result.lens_light_intensities, lens_truth, rtol=1e-6)
-    assert np.allclose(result.source_light_intensities, source_truth_values, rtol=1e-6)
+    # Relative to the largest intensity: the normal equations of these 20 overlapping
+    # Gaussians have a condition number of 3e9, so an intensity 400× below the largest
+    # carries rounding errors of a few 1e-6 of its own value (seen as 3e-6 with another
+    # CPU's BLAS kernels) while the normwise error stays below 1e-8.
+    for solved, truth in (
+        (result.lens_light_intensities, lens_truth),
+        (result.source_light_intensities, source_truth_values),
+    ):
+        assert np.allclose(solved, truth, rtol=0.0, atol=1e-6 * truth.max())
     assert result.log_evidence == result.log_likelihood
 
 
