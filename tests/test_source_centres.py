@@ -5,7 +5,7 @@ import pytest
 from sklearn.cluster import KMeans
 
 from mgelens.grid import pixel_centres, sub_grid
-from mgelens.source.border import border_sub_pixels, edge_pixels, relocate_to_border
+from mgelens.source.border import border_pixels, border_sub_pixels, relocate_to_border
 from mgelens.source.image_mesh import (
     _kmeans_plusplus,
     floored_adapt_image,
@@ -90,25 +90,46 @@ def test_compiled_kmeans_plusplus_matches_scikit_learn_quality():
     assert all((points == seed).all(axis=1).any() for seed in seeds)
 
 
-def test_edge_pixels_and_border_sub_pixels():
-    x, y = pixel_centres((21, 21), 0.1)
-    mask = np.hypot(x, y) > 0.75
-    edges = edge_pixels(mask)
-    used = ~mask
-    rows, cols = np.nonzero(used)
-    expected = []
+def anchor_border_pixels(mask):
+    """Brute force of the anchor's border: an unmasked pixel with a masked 8-neighbour
+    from which one of the four axis directions reaches the array edge through masked
+    pixels only."""
+    border = []
+    rows, cols = np.nonzero(~mask)
+    padded = np.pad(mask, 1, constant_values=True)
     for k, (r, c) in enumerate(zip(rows, cols, strict=True)):
-        window = mask[r - 1 : r + 2, c - 1 : c + 2]
-        if window.any():
-            expected.append(k)
-    assert edges.tolist() == expected
+        if not padded[r : r + 3, c : c + 3].any():
+            continue
+        if (
+            mask[:r, c].all()
+            or mask[r + 1 :, c].all()
+            or mask[r, :c].all()
+            or mask[r, c + 1 :].all()
+        ):
+            border.append(k)
+    return border
+
+
+@pytest.mark.parametrize("inner", [0.0, 0.35])
+def test_border_pixels_and_their_outermost_sub_pixels(inner):
+    x, y = pixel_centres((21, 21), 0.1)
+    r = np.hypot(x, y)
+    mask = (r > 0.75) | (r < inner)
+    pixels = border_pixels(mask)
+    assert pixels.tolist() == anchor_border_pixels(mask)
+    # the exterior edge only: of the 56 pixels with a masked 8-neighbour on the outer
+    # edge, the 16 that touch it only diagonally are left out, and so is the annulus's
+    # inner edge
+    assert pixels.size == 40
+    assert r[~mask][pixels].min() > 0.6
+    used = ~mask
     grid = sub_grid(x[used], y[used], 0.1, 4)
     border = border_sub_pixels(mask, grid.x, grid.y, 4, (0.0, 0.0))
-    assert border.size == edges.size
-    r = np.hypot(grid.x, grid.y)
-    for pixel, index in zip(edges, border, strict=True):
-        own = r[pixel * 16 : (pixel + 1) * 16]
-        assert r[index] == own.max()
+    assert border.size == pixels.size
+    r_sub = np.hypot(grid.x, grid.y)
+    for pixel, index in zip(pixels, border, strict=True):
+        own = r_sub[pixel * 16 : (pixel + 1) * 16]
+        assert r_sub[index] == own.max()
 
 
 def test_relocation_pulls_outliers_onto_the_border_only():
