@@ -116,6 +116,13 @@ def inversion_system(n_pixels: int = 1500):
     return q, d, h, fixed_zero, n
 
 
+def fresh_fit(dataset: FitDataset, model: LensModel):
+    """One evaluation as a sampler sees it: the mass moves, so nothing is reused."""
+    dataset._columns_cache.clear()
+    dataset._source_cache.clear()
+    return fit(dataset, model)
+
+
 def breakdown(dataset: FitDataset, model: LensModel) -> dict[str, float]:
     """Seconds spent per stage of one evaluation (same steps as ``fit``)."""
     times: dict[str, float] = {}
@@ -164,9 +171,7 @@ def main() -> None:
         model = make_model(dataset, adapt, n_pixels)
 
         def full(m=model):
-            dataset._columns_cache.clear()
-            dataset._source_cache.clear()  # a sampler moves the mass: nothing to reuse
-            return fit(dataset, m)
+            return fresh_fit(dataset, m)
 
         def cached_lens_light(m=model):
             dataset._source_cache.clear()

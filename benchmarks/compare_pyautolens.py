@@ -26,12 +26,28 @@ PyAutoLens sets its own numerical defaults. They show that both codes fit the sa
 import sys
 
 import numpy as np
-from bench_likelihood import MASS, PIXEL, RADIUS, lens_light_sets, make_model, mock_imaging
+from bench_likelihood import (
+    MASS,
+    PIXEL,
+    RADIUS,
+    fresh_fit,
+    lens_light_sets,
+    make_model,
+    mock_imaging,
+)
 from common import median_time, report, set_threads
 
-from mgelens.fit import FitDataset, FitSettings, fit, pixelized_operator
+from mgelens.fit import (
+    FitDataset,
+    FitSettings,
+    LensModel,
+    PixelizedSource,
+    fit,
+    pixelized_operator,
+)
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
-from mgelens.source.image_mesh import floored_adapt_image
+from mgelens.source.image_mesh import floored_adapt_image, overlay_centres
+from mgelens.source.regularization import ConstantSplit
 
 try:
     import autolens as al
@@ -55,14 +71,16 @@ def anchor_array(native: np.ndarray):
 
 
 def anchor_galaxies(regularization):
-    """Lens (2×30 + 10 MGE, EPL + shear) and pixelized source galaxies of configuration R."""
+    """Lens (2×30 + 10 MGE, EPL + shear) and pixelized source galaxies of configuration R,
+    with ``regularization`` (AdaptiveBrightnessSplit or ConstantSplit)."""
     basis = []
     for mge in lens_light_sets():
         ell = anchor_ell_comps(mge.ell_comps)
         q, _ = axis_ratio_and_angle_from(mge.ell_comps)
-        # mgelens σ is the major-axis dispersion; the anchor's `sigma` is the minor one.
+        # mgelens σ is the major-axis dispersion; the anchor's `sigma` is the minor one
+        # (SPEC §12.1: its profile is exp[−(q²x′² + y′²)/2σ²]).
         basis += [
-            al.lp_linear.Gaussian(centre=yx(mge.centre), ell_comps=ell, sigma=s * np.sqrt(q))
+            al.lp_linear.Gaussian(centre=yx(mge.centre), ell_comps=ell, sigma=s * q)
             for s in mge.sigmas
         ]
     epl, shear = MASS
@@ -77,21 +95,25 @@ def anchor_galaxies(regularization):
         ),
         shear=al.mp.ExternalShear(gamma_1=shear.gamma_1, gamma_2=shear.gamma_2),
     )
-    pixelization = al.Pixelization(
-        image_mesh=al.image_mesh.KMeans(pixels=1500),
-        mesh=al.mesh.VoronoiNN(),
-        regularization=al.reg.AdaptiveBrightnessSplit(
+    if isinstance(regularization, ConstantSplit):
+        anchor_regularization = al.reg.ConstantSplit(coefficient=regularization.coefficient)
+    else:
+        anchor_regularization = al.reg.AdaptiveBrightnessSplit(
             inner_coefficient=regularization.inner_coefficient,
             outer_coefficient=regularization.outer_coefficient,
             signal_scale=regularization.signal_scale,
-        ),
+        )
+    pixelization = al.Pixelization(
+        image_mesh=al.image_mesh.KMeans(pixels=1500),  # replaced by the preloaded mesh
+        mesh=al.mesh.VoronoiNN(),
+        regularization=anchor_regularization,
     )
     source = al.Galaxy(redshift=1.0, pixelization=pixelization)
     return lens, source
 
 
-def report_terms(code: str, log_evidence, chi2, reg, log_det_fh, log_det_h) -> None:
-    """The log evidence and its terms (SPEC §7) under ``<code>_...`` names, to 1e-3."""
+def report_terms(name: str, log_evidence, chi2, reg, log_det_fh, log_det_h) -> None:
+    """The log evidence and its terms (SPEC §7) as ``<name>_<term>``, to 1e-3."""
     for term, value in (
         ("log_evidence", log_evidence),
         ("chi2", chi2),
@@ -99,80 +121,105 @@ def report_terms(code: str, log_evidence, chi2, reg, log_det_fh, log_det_h) -> N
         ("log_det_curvature_regularization", log_det_fh),
         ("log_det_regularization", log_det_h),
     ):
-        print(f"{code}_{term}_R: {value:.3f}")
+        print(f"{name}_{term}: {value:.3f}")
 
 
-def main() -> None:
-    set_threads(2)
-    imaging, lensed = mock_imaging()
-    dataset = FitDataset.from_imaging(imaging, light_centre=MASS[0].centre)
-    model = make_model(dataset, lensed[~dataset.mask], 1500)
-    report("mgelens_likelihood_R_s", median_time(lambda: fit(dataset, model)))
-    # the anchor's uniform 4×4 light over-sampling instead of 16×16 within 0.3″ (SPEC §13)
-    uniform = FitDataset.from_imaging(
-        imaging, settings=FitSettings(lp_sub_size_centre=4), light_centre=MASS[0].centre
-    )
-    for code, data in (("mgelens", dataset), ("mgelens_uniform_4x4", uniform)):
-        r = fit(data, model)
-        terms = (r.chi_squared, r.regularization_term, r.log_det_curvature_regularization)
-        report_terms(code, r.log_evidence, *terms, r.log_det_regularization)
+def report_mgelens_terms(name: str, result) -> None:
+    terms = (result.chi_squared, result.regularization_term)
+    terms += (result.log_det_curvature_regularization, result.log_det_regularization)
+    report_terms(name, result.log_evidence, *terms)
 
+
+def report_anchor_terms(name: str, anchor) -> None:
+    inversion = anchor.inversion
+    terms = (anchor.chi_squared, inversion.regularization_term)
+    terms += (inversion.log_det_curvature_reg_matrix_term,)
+    report_terms(name, anchor.figure_of_merit, *terms, inversion.log_det_regularization_matrix_term)
+
+
+def anchor_imaging_of(imaging):
+    """The masked imaging with 4×4 over-sampling of light profiles and pixelization."""
     mask = al.Mask2D.circular(shape_native=imaging.shape, pixel_scales=PIXEL, radius=RADIUS)
     anchor_imaging = al.Imaging(
         data=anchor_array(imaging.data),
         noise_map=anchor_array(imaging.noise_map),
         psf=al.Kernel2D.no_mask(np.flipud(imaging.psf), pixel_scales=PIXEL),
     ).apply_mask(mask)
-    anchor_imaging = anchor_imaging.apply_over_sampling(
+    return anchor_imaging.apply_over_sampling(
         over_sampling=al.OverSamplingUniform(sub_size=4),
         over_sampling_pixelization=al.OverSamplingUniform(sub_size=4),
     )
+
+
+def anchor_fitter(anchor_imaging, model, lensed: np.ndarray, use_w_tilde: bool):
+    """A function returning the anchor's FitImaging of ``model`` as a search evaluates it:
+    the image-plane mesh (and w-tilde, if used) preloaded, everything else computed."""
+    mask = anchor_imaging.mask
     lens, source = anchor_galaxies(model.source.regularization)
-    source_x, source_y = model.source.image_plane_x, model.source.image_plane_y
     # The anchor's analysis floors adapt images before a fit (SPEC §12.11); mgelens's
     # regularization does the same inside.
-    floored = floored_adapt_image(np.flipud(lensed)[~mask])
-    adapt = al.Array2D(values=floored, mask=mask)
+    adapt_slim = floored_adapt_image(np.flipud(lensed)[~np.asarray(mask)])
+    adapt = al.Array2D(values=adapt_slim, mask=mask)
     adapt_images = al.AdaptImages(galaxy_image_dict={source: adapt})
-    mesh = [[], [al.Grid2DIrregular(values=np.column_stack([source_y, source_x]))]]
-    for name, use_w_tilde in (("w_tilde", True), ("mapping_matrix", False)):
-        # A search preloads the image-plane mesh and, for the w-tilde formalism, w-tilde.
-        extra = {"w_tilde": anchor_imaging.w_tilde} if use_w_tilde else {}
-        preloads = al.Preloads(use_w_tilde=use_w_tilde, image_plane_mesh_grid_pg_list=mesh, **extra)
-        settings = al.SettingsInversion(
-            use_w_tilde=use_w_tilde, use_positive_only_solver=True, use_border_relocator=True
-        )
-
-        def anchor_fit(settings=settings, preloads=preloads):
-            return al.FitImaging(
-                dataset=anchor_imaging,
-                tracer=al.Tracer(galaxies=[lens, source]),
-                adapt_images=adapt_images,
-                settings_inversion=settings,
-                preloads=preloads,
-            )
-
-        report(
-            f"pyautolens_{name}_likelihood_R_s",
-            median_time(lambda f=anchor_fit: f().figure_of_merit, repeats=3),
-        )
-    anchor = anchor_fit()
-    inversion = anchor.inversion
-    report_terms(
-        "pyautolens",
-        anchor.figure_of_merit,
-        anchor.chi_squared,
-        inversion.regularization_term,
-        inversion.log_det_curvature_reg_matrix_term,
-        inversion.log_det_regularization_matrix_term,
+    mesh_yx = np.column_stack([model.source.image_plane_y, model.source.image_plane_x])
+    mesh = [[], [al.Grid2DIrregular(values=mesh_yx)]]
+    extra = {"w_tilde": anchor_imaging.w_tilde} if use_w_tilde else {}
+    preloads = al.Preloads(use_w_tilde=use_w_tilde, image_plane_mesh_grid_pg_list=mesh, **extra)
+    settings = al.SettingsInversion(
+        use_w_tilde=use_w_tilde, use_positive_only_solver=True, use_border_relocator=True
     )
+
+    def anchor_fit():
+        return al.FitImaging(
+            dataset=anchor_imaging,
+            tracer=al.Tracer(galaxies=[lens, source]),
+            adapt_images=adapt_images,
+            settings_inversion=settings,
+            preloads=preloads,
+        )
+
+    return anchor_fit
+
+
+def overlay_model(dataset: FitDataset, model) -> LensModel:
+    """Configuration A: R with the 34×34 overlay mesh and ConstantSplit(1) regularization,
+    whose inputs are pure geometry (no k-means, no adapt image)."""
+    x, y = overlay_centres(dataset.mask, PIXEL, (34, 34))
+    source = PixelizedSource(x, y, ConstantSplit(1.0))
+    return LensModel(mass=model.mass, lens_light=model.lens_light, source=source)
+
+
+def main() -> None:
+    set_threads(2)
+    imaging, lensed = mock_imaging()
+    dataset = FitDataset.from_imaging(imaging, light_centre=MASS[0].centre)
+    # the anchor's uniform 4×4 light over-sampling instead of 16×16 within 0.3″ (SPEC §13)
+    uniform = FitDataset.from_imaging(
+        imaging, settings=FitSettings(lp_sub_size_centre=4), light_centre=MASS[0].centre
+    )
+    model = make_model(dataset, lensed[~dataset.mask], 1500)
+    anchor_imaging = anchor_imaging_of(imaging)
+
+    report("mgelens_likelihood_R_s", median_time(lambda: fresh_fit(dataset, model)))
+    for name, use_w_tilde in (("w_tilde", True), ("mapping_matrix", False)):
+        anchor_fit = anchor_fitter(anchor_imaging, model, lensed, use_w_tilde)
+        seconds = median_time(lambda f=anchor_fit: f().figure_of_merit, repeats=3)
+        report(f"pyautolens_{name}_likelihood_R_s", seconds)
+    report_mgelens_terms("mgelens_R", fit(dataset, model))
+    report_mgelens_terms("mgelens_uniform_4x4_R", fit(uniform, model))
+    anchor = anchor_fit()
+    report_anchor_terms("pyautolens_R", anchor)
     # the mapping matrices (border relocation + natural-neighbour weights of every sub-pixel)
     slim = np.full(imaging.shape, -1)
     slim[~dataset.mask] = np.arange(np.sum(~dataset.mask))
-    rows = np.flipud(slim)[~np.asarray(mask)]  # anchor pixel order → mgelens slim index
+    rows = np.flipud(slim)[~np.asarray(anchor_imaging.mask)]  # anchor order → mgelens slim
     ours = pixelized_operator(dataset, model.mass, model.source).mapping.toarray()[rows]
-    theirs = np.asarray(inversion.linear_obj_list[-1].mapping_matrix)
-    report("mapping_matrix_max_abs_difference", float(np.abs(ours - theirs).max()))
+    theirs = np.asarray(anchor.inversion.linear_obj_list[-1].mapping_matrix)
+    report("mapping_matrix_max_abs_difference_R", float(np.abs(ours - theirs).max()))
+
+    overlay = overlay_model(uniform, model)
+    report_mgelens_terms("mgelens_uniform_4x4_A", fit(uniform, overlay))
+    report_anchor_terms("pyautolens_A", anchor_fitter(anchor_imaging, overlay, lensed, False)())
 
 
 if __name__ == "__main__":
