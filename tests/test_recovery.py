@@ -12,9 +12,11 @@ from mgelens import simulate
 from mgelens.grid import pixel_centres
 from mgelens.recovery import (
     lens_light_recovery,
+    light_split_profile,
     mass_recovery,
     recovery_summary,
     recovery_table,
+    split_annulus_edges,
     true_mass_parameters,
 )
 
@@ -96,3 +98,44 @@ def test_lens_light_recovery_excludes_the_centre_and_outside_the_mask():
     assert summary["criteria"]["epl_within_3sigma"] is False  # nothing fitted, nothing shown
     with pytest.raises(ValueError, match="shape"):
         lens_light_recovery(true, model[:-1], mask, pixel_scale, centre)
+
+
+def test_light_split_separates_a_trade_between_lens_and_source_from_a_total_error():
+    shape, pixel_scale, centre = (61, 61), 0.05, (0.05, -0.05)
+    x, y = pixel_centres(shape, pixel_scale)
+    radius = np.hypot(x - centre[0], y - centre[1])
+    lens = np.exp(-radius / 0.4)
+    ring = np.exp(-0.5 * ((radius - 1.0) / 0.15) ** 2)
+    source = 5.0 * ring
+    mask = radius > 1.4
+    # the fit moved 0.2 × ring from the source into the lens light and lost 1 % of the lens
+    model_lens = lens + 0.2 * ring - 0.01 * lens
+    model_source = source - 0.2 * ring
+    edges = np.array([0.2, 0.8, 1.2, 1.4])
+    rows = light_split_profile(lens, source, model_lens, model_source, mask, pixel_scale,
+                               centre, edges)  # fmt: skip
+    assert [(r.inner_radius, r.outer_radius) for r in rows] == [(0.2, 0.8), (0.8, 1.2), (1.2, 1.4)]
+    for row in rows:
+        keep = ~mask & (radius >= row.inner_radius) & (radius < row.outer_radius)
+        moved = 0.2 * ring[keep].sum() / lens[keep].sum()
+        assert row.n_pixels == np.count_nonzero(keep)
+        assert row.lens_light_error == pytest.approx(moved - 0.01, rel=1e-12)
+        assert row.lensed_source_error == pytest.approx(-moved, rel=1e-12)
+        assert row.total_error == pytest.approx(-0.01, rel=1e-9)
+        assert row.source_to_lens_ratio == pytest.approx(25.0 * moved, rel=1e-12)
+    assert rows[1].lens_light_error > 0.5  # the ring's annulus: a large trade, total −1 %
+    summary = recovery_summary("X", [], None, rows)
+    table = recovery_table([json.loads(json.dumps(summary))])
+    assert table.loc[0, "light_split.lens_light_error"] == pytest.approx(rows[1].lens_light_error)
+    assert table.loc[0, "light_split.total_error"] == pytest.approx(-0.01, rel=1e-9)
+    with pytest.raises(ValueError, match="increasing"):
+        light_split_profile(lens, source, model_lens, model_source, mask, pixel_scale, centre,
+                            edges[::-1])  # fmt: skip
+    with pytest.raises(ValueError, match="shape"):
+        light_split_profile(lens, source[:-1], model_lens, model_source, mask, pixel_scale,
+                            centre, edges)  # fmt: skip
+
+
+def test_split_annuli_cover_the_mask_beyond_the_centre_in_steps_of_about_0_3_arcsec():
+    assert split_annulus_edges(1.8) == pytest.approx([0.2, 0.52, 0.84, 1.16, 1.48, 1.8])
+    assert split_annulus_edges(0.3) == pytest.approx([0.2, 0.3])

@@ -315,6 +315,8 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
         "epl_within_3sigma",
         "lens_light_within_5_percent",
     }
+    split = recovery["light_split"]
+    assert split and all(np.isfinite(row["total_error"]) for row in split)
     recovered = pd.read_csv(tmp_path / "results" / "summary" / "recovery.csv")
     assert list(recovered["lens"]) == ["M1"]
     assert recovered["mass.slope.truth"].iloc[0] == pytest.approx(2.1)

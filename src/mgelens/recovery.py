@@ -5,12 +5,18 @@
   (criterion: within 2 %).
 * **Lens light**: (model − true)/true of the PSF-convolved lens light inside the fit mask,
   beyond 0.2″ of the lens centre (criterion: |·| < 5 % everywhere there).
+* **Light split** (diagnostic, no criterion): in annuli about the lens centre, the errors of
+  the fitted lens light, of the fitted lensed source and of their sum, each as a fraction
+  of the true lens light in the annulus. Where the lensed source is bright, the MGE and
+  the pixelized source can trade smooth light with little change in the fit; a lens-light
+  error matched by an opposite source error, with a small total error, is that trade.
 
 Angles are degrees counter-clockwise from +x and defined modulo 180°: a true angle is
 inside an interval if any of angle, angle ± 180° is. Mocks without external shear have
 true shear components of 0.
 """
 
+import itertools
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
@@ -140,10 +146,90 @@ def lens_light_recovery(
     )
 
 
+@dataclass(frozen=True)
+class LightSplitAnnulus:
+    """Light errors in one annulus r_inner ≤ r < r_outer (arcsec) about the lens centre.
+
+    Each error is Σ(model − true) over the annulus's pixels divided by Σ true lens light
+    there, for the lens light, the lensed source and their sum (the whole model image).
+    """
+
+    inner_radius: float
+    outer_radius: float
+    n_pixels: int
+    lens_light_error: float
+    lensed_source_error: float
+    total_error: float
+    source_to_lens_ratio: float
+    """Σ true lensed source / Σ true lens light in the annulus."""
+
+
+def light_split_profile(
+    true_lens: np.ndarray,
+    true_source: np.ndarray,
+    model_lens: np.ndarray,
+    model_source: np.ndarray,
+    mask: np.ndarray,
+    pixel_scale: float,
+    centre: tuple[float, float],
+    edges: np.ndarray,
+) -> list[LightSplitAnnulus]:
+    """Lens-light, lensed-source and total errors in the annuli ``edges[k] ≤ r < edges[k+1]``.
+
+    All images are native PSF-convolved images of one shape and unit (the mock's
+    ``lens_light_blurred`` and ``lensed_source_blurred``, the phase's LENS and LENSED);
+    ``mask`` is True where excluded. Annuli without unmasked pixels or true lens light are
+    left out.
+
+    Raises
+    ------
+    ValueError
+        If the shapes differ or ``edges`` is not increasing.
+    """
+    images = (true_lens, true_source, model_lens, model_source, mask)
+    if len({image.shape for image in images}) != 1:
+        raise ValueError(f"light images and mask differ in shape: {[i.shape for i in images]}")
+    edges = np.asarray(edges, dtype=float)
+    if edges.ndim != 1 or edges.size < 2 or np.any(np.diff(edges) <= 0):
+        raise ValueError(f"annulus edges must be increasing, got {edges.tolist()}")
+    x, y = pixel_centres(true_lens.shape, pixel_scale)
+    radius = np.hypot(x - centre[0], y - centre[1])
+    rows = []
+    for inner, outer in itertools.pairwise(edges):
+        keep = ~mask & (radius >= inner) & (radius < outer)
+        lens_total = float(true_lens[keep].sum())
+        if not keep.any() or lens_total <= 0.0:
+            continue
+        lens_error = float((model_lens[keep] - true_lens[keep]).sum()) / lens_total
+        source_error = float((model_source[keep] - true_source[keep]).sum()) / lens_total
+        rows.append(
+            LightSplitAnnulus(
+                inner_radius=float(inner),
+                outer_radius=float(outer),
+                n_pixels=int(keep.sum()),
+                lens_light_error=lens_error,
+                lensed_source_error=source_error,
+                total_error=lens_error + source_error,
+                source_to_lens_ratio=float(true_source[keep].sum()) / lens_total,
+            )
+        )
+    return rows
+
+
+def split_annulus_edges(mask_radius: float, inner_radius: float = LENS_LIGHT_INNER_RADIUS):
+    """Annulus edges from ``inner_radius`` to ``mask_radius`` in steps of about 0.3″."""
+    n = max(1, round((mask_radius - inner_radius) / 0.3))
+    return np.linspace(inner_radius, mask_radius, n + 1)
+
+
 def recovery_summary(
-    lens: str, mass: list[ParameterRecovery], light: LensLightRecovery | None
+    lens: str,
+    mass: list[ParameterRecovery],
+    light: LensLightRecovery | None,
+    split: list[LightSplitAnnulus] | None = None,
 ) -> dict:
-    """JSON-ready record with the three SPEC §11 criteria as booleans."""
+    """JSON-ready record with the three SPEC §11 criteria as booleans (and, if given, the
+    light split per annulus under ``light_split``)."""
     by_name = {row.name: row for row in mass}
     theta_e = by_name.get("mass.einstein_radius")
     theta_e_error = None if theta_e is None else theta_e.error / theta_e.truth
@@ -153,6 +239,7 @@ def recovery_summary(
         "mass": [asdict(row) for row in mass],
         "einstein_radius_relative_error": theta_e_error,
         "lens_light": None if light is None else asdict(light),
+        "light_split": None if split is None else [asdict(row) for row in split],
         "criteria": {
             "einstein_radius_within_2_percent": None
             if theta_e_error is None
@@ -168,7 +255,8 @@ def recovery_summary(
 def recovery_table(records: list[Mapping]) -> pd.DataFrame:
     """One row per lens from :func:`recovery_summary` records: per parameter the truth,
     median and whether the 3σ interval holds it, the θ_E relative error, lens-light
-    statistics and the three criteria."""
+    statistics, the largest lens-light and total errors of the light split (by modulus,
+    with sign) and the three criteria."""
     rows = []
     for record in records:
         row: dict = {"lens": record["lens"]}
@@ -181,6 +269,10 @@ def recovery_table(records: list[Mapping]) -> pd.DataFrame:
         light = record["lens_light"] or {}
         for key in ("mean", "p95_abs", "max_abs"):
             row[f"lens_light.{key}"] = light.get(key, np.nan)
+        split = record.get("light_split") or []
+        for key in ("lens_light_error", "total_error"):
+            values = [annulus[key] for annulus in split]
+            row[f"light_split.{key}"] = max(values, key=abs) if values else np.nan
         row.update(record["criteria"])
         rows.append(row)
     return pd.DataFrame(rows)

@@ -63,6 +63,7 @@ rule recovery:
     input:
         truth="results/{lens}/mock/truth.json",
         lens_light="results/{lens}/mock/lens_light_blurred.fits",
+        lensed_source="results/{lens}/mock/lensed_source_blurred.fits",
         result="results/{lens}/mass/result.json",
         model="results/{lens}/mass/model.fits",
     output:
