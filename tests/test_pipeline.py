@@ -629,7 +629,10 @@ def sersic_settings(**changes):
             "positive_only": False,
             "source_pixels": 60,
             "overlay_shape": [8, 8],
-            "samplers": {p: {**capped, "max_iterations": n} for p, n in iterations.items()},
+            "samplers": {
+                p: {**capped, "method": "dynesty_static", "max_iterations": n}
+                for p, n in iterations.items()
+            },
             **changes,
         }
     )

@@ -157,6 +157,30 @@ def test_max_iterations_caps_the_run_with_a_warning(fast_run):
         SamplerSettings(max_iterations=0)
 
 
+@pytest.mark.parametrize(
+    "settings",
+    [
+        SamplerSettings(n_live=100, progress_every=1e9, max_calls=300),
+        SamplerSettings(
+            method="nautilus", n_live=100, n_networks=1, progress_every=0, max_calls=300
+        ),
+    ],
+    ids=["dynesty", "nautilus"],
+)
+def test_max_calls_caps_the_run_with_a_warning(settings):
+    if settings.method == "nautilus":
+        pytest.importorskip("nautilus")
+    lines: list[str] = []
+    likelihood = GaussianLikelihood()
+    output = run_nested(likelihood, SPACE, settings, seed=11, log=lines.append)
+    # dynesty stops at the first iteration past the cap (its 100 first live points are not
+    # counted against it), nautilus after the batch (100 calls) that reaches it
+    assert 300 <= output.n_calls == likelihood.calls <= 300 + 2 * 100
+    assert any("WARNING stopped at max_calls = 300" in line for line in lines)
+    with pytest.raises(ValueError, match="max_calls must be >= 1"):
+        SamplerSettings(method=settings.method, max_calls=0)
+
+
 def test_rejected_samples_are_counted():
     likelihood = GaussianLikelihood(reject_below=-2.0)
     output = run_nested(likelihood, SPACE, FAST, seed=5, log=lambda _: None)
@@ -255,6 +279,32 @@ def test_nautilus_recovers_evidence():
     assert output.n_calls == likelihood.calls
     assert output.n_rejected == likelihood.rejected > 0
     assert_recovers_gaussian(output, tolerance=0.15)
+
+
+def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
+    pytest.importorskip("nautilus")
+    pytest.importorskip("h5py")
+    settings = SamplerSettings(
+        method="nautilus", n_live=100, n_networks=1, n_eff=200, progress_every=1e9
+    )
+    reference = run_nested(GaussianLikelihood(), SPACE, settings, seed=4, log=lambda _: None)
+    checkpoint = tmp_path / "sampler.pickle"
+    written = checkpoint.with_suffix(".h5")  # nautilus's own checkpoint file
+    stop = GaussianLikelihood(stop_after=reference.n_calls // 2, stop_once_exists=written)
+    with pytest.raises(Interrupted):
+        run_nested(stop, SPACE, settings, checkpoint, seed=4, log=lambda _: None)
+    assert written.exists()
+    lines: list[str] = []
+    likelihood = GaussianLikelihood()
+    resumed = run_nested(likelihood, SPACE, settings, checkpoint, 4, lines.append)
+    assert "seed 4, 0 calls so far" not in lines[0]  # it started from the checkpoint
+    assert 0 < likelihood.calls < reference.n_calls  # only the rest was sampled
+    np.testing.assert_array_equal(resumed.samples, reference.samples)
+    np.testing.assert_array_equal(resumed.log_weights, reference.log_weights)
+    assert resumed.log_evidence == reference.log_evidence
+    assert resumed.n_calls == reference.n_calls
+    with pytest.raises(CheckpointMismatchError, match="seed"):
+        run_nested(failing_likelihood, SPACE, settings, checkpoint, 5, lambda _: None)
 
 
 def test_sample_method_resolution():

@@ -89,13 +89,17 @@ class SamplerSettings:
         dynesty only: stop after this many iterations even if ``dlogz`` is not reached
         (dynesty ``maxiter``; a warning is logged). For smoke tests and hard time limits;
         the posterior of a capped run is not converged.
+    max_calls : int or None
+        Stop after this many likelihood calls, counted over the whole run including
+        resumed sessions (nautilus ``n_like_max``, dynesty ``maxcall``), with a warning;
+        as ``max_iterations``, for smoke tests.
     enlarge_per_dim, split_threshold, n_networks, n_batch, f_live, n_shell, n_eff, \
 discard_exploration
         Nautilus settings (SPEC §8.3).
     checkpoint_every : float
         Seconds between checkpoints (dynesty).
     progress_every : float
-        Seconds between progress lines.
+        Seconds between progress lines (nautilus: at least 1 s).
     n_processes : int
         Likelihood processes; 1 = no pool.
     queue_size : int or None
@@ -115,6 +119,7 @@ discard_exploration
     facc: float = 0.2
     n_effective: int | None = None
     max_iterations: int | None = None
+    max_calls: int | None = None
     enlarge_per_dim: float = 1.1
     split_threshold: float = 100.0
     n_networks: int = 4
@@ -140,6 +145,8 @@ discard_exploration
                 raise ValueError("max_iterations applies to the dynesty samplers only")
             if self.max_iterations < 1:
                 raise ValueError(f"max_iterations must be >= 1, got {self.max_iterations}")
+        if self.max_calls is not None and self.max_calls < 1:
+            raise ValueError(f"max_calls must be >= 1, got {self.max_calls}")
         if self.checkpoint_every < 0 or self.progress_every < 0:
             raise ValueError("checkpoint_every and progress_every must be >= 0 seconds")
 
@@ -489,7 +496,9 @@ def _new_dynesty_sampler(settings: SamplerSettings, n_dim: int, seed: int, pool)
     )
 
 
-def _run_dynesty(sampler, settings: SamplerSettings, progress, checkpoint: str | None, resume):
+def _run_dynesty(
+    sampler, settings: SamplerSettings, progress, checkpoint: str | None, resume, calls_so_far
+):
     common = {
         "print_progress": True,
         "print_func": progress,
@@ -497,6 +506,9 @@ def _run_dynesty(sampler, settings: SamplerSettings, progress, checkpoint: str |
         "checkpoint_every": settings.checkpoint_every,
         "resume": resume,
         "maxiter": settings.max_iterations,
+        "maxcall": None
+        if settings.max_calls is None
+        else max(settings.max_calls - calls_so_far, 1),
     }
     with warnings.catch_warnings():  # mgelens logs its own warning for max_iterations
         warnings.filterwarnings("ignore", "The sampling was stopped short", UserWarning)
@@ -558,11 +570,16 @@ def _sample_dynesty(
             setattr(sampler, _STATE_ATTRIBUTE, state)
             progress = _ProgressLine(log, settings.progress_every, state, settings.method)
             checkpoint = None if checkpoint_path is None else str(checkpoint_path)
-            _run_dynesty(sampler, settings, progress, checkpoint, resume)
+            _run_dynesty(sampler, settings, progress, checkpoint, resume, stored["n_calls"])
             if settings.max_iterations and sampler.results.niter >= settings.max_iterations:
                 log(
                     f"{settings.method}: WARNING stopped at max_iterations = "
                     f"{settings.max_iterations} before dlogz was reached: not converged"
+                )
+            if settings.max_calls and evaluation.counts[0] >= settings.max_calls:
+                log(
+                    f"{settings.method}: WARNING stopped at max_calls = {settings.max_calls} "
+                    "before dlogz was reached: not converged"
                 )
             final = state.snapshot(finished=True)
             if checkpoint_path is not None:
@@ -599,6 +616,19 @@ def _nautilus_checkpoint(checkpoint_path: Path | None, log) -> Path | None:
         log("nautilus: h5py is not installed, running without a checkpoint")
         return None
     return checkpoint_path.with_suffix(".h5")
+
+
+NAUTILUS_MIN_PROGRESS_INTERVAL = 1.0
+"""Shortest time between nautilus progress lines, seconds: nautilus starts no likelihood
+call once its timeout has passed, so a zero timeout would never advance."""
+
+
+def _nautilus_progress(sampler, seconds: float) -> str:
+    """Progress line; N_eff and ln Z are undefined before the first batch."""
+    parts = [f"nautilus: {sampler.n_like} calls"]
+    if sampler.n_like > 0:
+        parts += [f"N_eff = {sampler.n_eff:.0f}", f"ln Z = {sampler.log_z:.3f}"]
+    return ", ".join([*parts, f"{seconds:.0f} s"])
 
 
 def _sample_nautilus(
@@ -641,18 +671,20 @@ def _sample_nautilus(
             resume=True,
         )
         log(f"nautilus: {space.n_free} free parameters, seed {seed}, {sampler.n_like} calls so far")
+        cap = math.inf if settings.max_calls is None else settings.max_calls
         while not sampler.run(
             f_live=settings.f_live,
             n_shell=settings.n_shell,
             n_eff=settings.n_eff,
+            n_like_max=cap,
             discard_exploration=settings.discard_exploration,
-            timeout=settings.progress_every,
+            timeout=max(settings.progress_every, NAUTILUS_MIN_PROGRESS_INTERVAL),
             verbose=False,
         ):
-            log(
-                f"nautilus: {sampler.n_like} calls, N_eff = {sampler.n_eff:.0f}, "
-                f"ln Z = {sampler.log_z:.3f}, {time.perf_counter() - started:.0f} s"
-            )
+            log(_nautilus_progress(sampler, time.perf_counter() - started))
+            if sampler.n_like >= cap:
+                log(f"nautilus: WARNING stopped at max_calls = {cap}: not converged")
+                break
         points, log_w, log_l = sampler.posterior()
         all_log_l = np.concatenate([np.asarray(v, dtype=float) for v in sampler.log_l])
         n_calls = int(sampler.n_like)
