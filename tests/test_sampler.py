@@ -168,8 +168,6 @@ def test_max_iterations_caps_the_run_with_a_warning(fast_run):
     ids=["dynesty", "nautilus"],
 )
 def test_max_calls_caps_the_run_with_a_warning(settings):
-    if settings.method == "nautilus":
-        pytest.importorskip("nautilus")
     lines: list[str] = []
     likelihood = GaussianLikelihood()
     output = run_nested(likelihood, SPACE, settings, seed=11, log=lines.append)
@@ -270,7 +268,6 @@ def test_dynamic_sampler_resumes(tmp_path, dynamic_run):
 
 
 def test_nautilus_recovers_evidence():
-    pytest.importorskip("nautilus")
     settings = SamplerSettings(
         method="nautilus", n_live=100, n_networks=1, n_eff=200, progress_every=1e9
     )
@@ -282,8 +279,6 @@ def test_nautilus_recovers_evidence():
 
 
 def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
-    pytest.importorskip("nautilus")
-    pytest.importorskip("h5py")
     settings = SamplerSettings(
         method="nautilus", n_live=100, n_networks=1, n_eff=200, progress_every=1e9
     )

@@ -25,6 +25,7 @@ import json
 import logging
 from pathlib import Path
 
+import numpy as np
 from astropy.io import fits
 
 from mgelens.atomic import atomic_path, write_json
@@ -77,8 +78,8 @@ def run(args: argparse.Namespace) -> int:
         mass = mass_recovery(truth, phase)
         true_light, _ = read_fits_image(args.lens_dir / "lens_light_blurred.fits")
         true_source, _ = read_fits_image(args.lens_dir / "lensed_source_blurred.fits")
-        model_light = fits.getdata(args.phase / MODEL_FILE, extname="LENS")
-        model_source = fits.getdata(args.phase / MODEL_FILE, extname="LENSED")
+        with fits.open(args.phase / MODEL_FILE) as model:
+            model_light, model_source = (np.array(model[name].data) for name in ("LENS", "LENSED"))
         pixel_scale = float(truth["observation"]["pixel_scale"])
         mask_centre = tuple(phase.settings["slam"]["mask_centre"])
         radius = float(phase.settings["mask_radius"])
