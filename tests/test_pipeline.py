@@ -334,11 +334,14 @@ def test_profiles_paper_and_quick():
     assert (paper.psf_trim, quick.psf_trim) == (1e-10, 1e-4)
 
 
-def test_psf_trim_reaches_the_fit(mock_dir):
-    for trim in (1e-10, 1e-4):
-        settings = settings_from_mapping({"mask_radius": MASK_RADIUS, "psf_trim": trim})
+def test_fit_settings_reach_the_fit(mock_dir):
+    for trim, force_edge in ((1e-10, True), (1e-4, False)):
+        settings = settings_from_mapping(
+            {"mask_radius": MASK_RADIUS, "psf_trim": trim, "force_edge_pixels_to_zero": force_edge}
+        )
         dataset, _ = phases.load_dataset(mock_dir, settings, (0.0, 0.0))
         assert dataset.settings.psf_trim == trim
+        assert dataset.settings.force_edge_pixels_to_zero is force_edge
 
 
 def test_settings_from_yaml_override_the_profile(tmp_path):
@@ -384,6 +387,8 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"samplers": {"source": {}}}, "slam.samplers.source"),
         ({"mge_sets": 3}, "mge_sets"),
         ({"profile": "fast"}, "fast"),
+        ({"positive_only": "false"}, "positive_only must be true or false, got 'false'"),
+        ({"force_edge_pixels_to_zero": 0}, "force_edge_pixels_to_zero must be true or false"),
     ],
 )
 def test_invalid_settings_name_the_key(section, message):

@@ -190,6 +190,7 @@ def load_dataset(
         lp_sub_size_centre=settings.lp_sub_size_centre,
         lp_centre_radius=settings.lp_centre_radius,
         use_border=settings.use_border,
+        force_edge_pixels_to_zero=settings.force_edge_pixels_to_zero,
         psf_trim=settings.psf_trim,
     )
     return FitDataset.from_imaging(imaging, mask, fit_settings, light_centre), radius

@@ -100,6 +100,9 @@ class SlamSettings:
         the few live points otherwise lose the physical mode to demagnified solutions).
     positions_factor, positions_minimum : float
         Threshold = max(factor × SP's own source-plane scatter, minimum arcsec) (3, 0.2″).
+    force_edge_pixels_to_zero : bool
+        Fix the convex-hull source pixels to zero in the non-negative solve (SPEC §6.3, the
+        anchor's default since 2023). Off, the hull pixels are solved like the others.
     sub_size, lp_sub_size, lp_sub_size_centre, lp_centre_radius, use_border, psf_trim
         Fit settings (:class:`mgelens.fit.FitSettings`). ``psf_trim`` cuts the PSF to the
         kernel holding every entry ≥ that fraction of its peak: 1e−10 (paper) changes no
@@ -129,6 +132,7 @@ class SlamSettings:
     positions_penalty: bool = False
     positions_factor: float = 3.0
     positions_minimum: float = 0.2
+    force_edge_pixels_to_zero: bool = True
     sub_size: int = 4
     lp_sub_size: int = 4
     lp_sub_size_centre: int = 16
@@ -138,6 +142,10 @@ class SlamSettings:
     samplers: Mapping[str, SamplerSettings] = field(default_factory=dict)
 
     def __post_init__(self):
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.type in (bool, "bool") and not isinstance(value, bool):
+                raise SettingsError(f"{f.name} must be true or false, got {value!r}")
         _check_choice("lens_light_model", self.lens_light_model, LENS_LIGHT_MODELS)
         _check_choice("mge_sets", self.mge_sets, MGE_SET_CHOICES)
         _check_choice("spix1_regularization", self.spix1_regularization, SPIX1_REGULARIZATIONS)
