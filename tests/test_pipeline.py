@@ -295,6 +295,9 @@ def test_regularization_from_values():
     adaptive = models.regularization_from(values, "adaptive_split")
     assert (adaptive.inner_coefficient, adaptive.outer_coefficient) == (1.0, 2.0)
     assert adaptive.signal_scale == 0.5
+    assert (adaptive.offset, adaptive.signals) == ("anchor", "anchor")
+    weighted = models.regularization_from(values, "adaptive_split", "paper", "weighted")
+    assert (weighted.offset, weighted.signals) == ("paper", "weighted")
 
 
 # -- positions penalty --------------------------------------------------------------------
@@ -389,6 +392,7 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"profile": "fast"}, "fast"),
         ({"positive_only": "false"}, "positive_only must be true or false, got 'false'"),
         ({"force_edge_pixels_to_zero": 0}, "force_edge_pixels_to_zero must be true or false"),
+        ({"adaptive_signals": "mean"}, "adaptive_signals must be one of"),
     ],
 )
 def test_invalid_settings_name_the_key(section, message):
@@ -695,6 +699,16 @@ def test_sersic_chain_refits_three_sersics_and_frees_them_with_the_mass(sersic_r
     assert all(not c.get("fixed", False) for c in _components(sersic_run / "mass"))
     summary = json.loads((sersic_run / "mass" / "result.json").read_text())
     assert summary["max_likelihood_fit"]["positive_only"] is False
+
+
+def test_adaptive_signals_setting_reaches_the_pixelized_phases(sersic_run, mock_dir):
+    for signals in ("anchor", "weighted"):
+        settings = sersic_settings(adaptive_signals=signals)
+        for problem in (phases.spix2_problem, phases.mass_problem):
+            model = problem(mock_dir, sersic_run, settings).model
+            assert model.describe()["source"]["adaptive_signals"] == signals
+            values = PhaseResult.read(sersic_run / "mass").max_likelihood
+            assert model.build(values).source.regularization.signals == signals
 
 
 def test_sersic_and_mge_results_do_not_mix(sersic_run, mock_dir):

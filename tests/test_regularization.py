@@ -3,7 +3,11 @@
 import numpy as np
 import pytest
 
-from mgelens.source.interpolate import cross_points, natural_neighbour_weights
+from mgelens.source.interpolate import (
+    cross_points,
+    natural_neighbour_weights,
+    nearest_cell_weights,
+)
 from mgelens.source.mapping import SourceWeights
 from mgelens.source.mesh import VoronoiMesh
 from mgelens.source.regularization import (
@@ -57,8 +61,44 @@ def test_adaptive_signals_and_weights(mesh, weights):
     expected = total / np.maximum(count, 1)
     expected = (expected / expected.max()) ** 0.5
     assert np.allclose(signals, expected, rtol=1e-12)
+    weight_sum = np.bincount(weights.indices, weights.values, mesh.n_points)
+    weighted = np.where(weight_sum > 0, total / np.where(weight_sum > 0, weight_sum, 1), 0)
+    weighted = (weighted / weighted.max()) ** 0.5
+    assert np.allclose(adaptive_pixel_signals(weights, adapt, 0.5, "weighted"), weighted)
+    with pytest.raises(ValueError, match="average must be one of"):
+        adaptive_pixel_signals(weights, adapt, 0.5, "median")
     w = adaptive_weights(signals, 3.0, 0.5)
     assert np.allclose(w, (3.0 * signals + 0.5 * (1 - signals)) ** 2)
+
+
+def test_signal_averages_agree_for_nearest_cell_mapping(mesh):
+    qx, qy = np.random.default_rng(4).uniform(-0.6, 0.6, size=(2, 400))
+    weights = SourceWeights(*nearest_cell_weights(mesh, qx, qy), 2, mesh.n_points)
+    adapt = np.random.default_rng(5).uniform(0.1, 1.0, weights.n_pixels)
+    anchor = adaptive_pixel_signals(weights, adapt, 0.7)
+    assert np.array_equal(anchor, adaptive_pixel_signals(weights, adapt, 0.7, "weighted"))
+
+
+def test_weighted_signals_are_continuous_as_a_sub_pixel_moves(mesh, weights):
+    """A sub-pixel moving in steps of 1e−4″ gains and loses natural neighbours at vanishing
+    weight: the anchor's per-count average jumps there, the weighted average does not."""
+    rng = np.random.default_rng(6)
+    qx, qy = rng.uniform(-0.6, 0.6, size=(2, 4 * 60))
+    adapt = rng.uniform(0.1, 1.0, 60)
+    path = np.linspace(-0.3, 0.3, 6001)
+    largest = {}
+    for average in ("anchor", "weighted"):
+        previous, steps = None, []
+        for t in path:
+            qx[0], qy[0] = t, 0.37 * t + 0.05
+            w = SourceWeights(*natural_neighbour_weights(mesh, qx, qy), 2, mesh.n_points)
+            signals = adaptive_pixel_signals(w, adapt, 1.0, average)
+            if previous is not None:
+                steps.append(np.abs(signals - previous).max())
+            previous = signals
+        largest[average] = max(steps)
+    assert largest["anchor"] > 0.005  # measured 0.014
+    assert largest["weighted"] < 2e-4  # measured 4e-5, the smooth change of a 1e-4 step
 
 
 def test_adaptive_matrix_squares_the_weights_per_directed_pair(mesh, weights):

@@ -311,8 +311,12 @@ class PositionsPenalty:
 
 
 # -- sources ----------------------------------------------------------------------------
-def regularization_from(values: Mapping[str, float], scheme: str, offset: str = "anchor"):
-    """Regularization object of ``scheme`` ("constant", "constant_split", "adaptive_split")."""
+def regularization_from(
+    values: Mapping[str, float], scheme: str, offset: str = "anchor", signals: str = "anchor"
+):
+    """Regularization object of ``scheme`` ("constant", "constant_split", "adaptive_split");
+    ``offset`` is the cross offset (SPEC §5.3), ``signals`` the adaptive signal average
+    (:func:`mgelens.source.regularization.adaptive_pixel_signals`)."""
     if scheme == "constant":
         return Constant(values["regularization.coefficient"])
     if scheme == "constant_split":
@@ -323,6 +327,7 @@ def regularization_from(values: Mapping[str, float], scheme: str, offset: str = 
             values["regularization.outer_coefficient"],
             values["regularization.signal_scale"],
             offset,
+            signals,
         )
     raise ValueError(f"unknown regularization scheme {scheme!r}")
 
@@ -359,6 +364,8 @@ class MeshSourceModel:
         Slim adapt image (needed by adaptive schemes).
     mesh : str
         "overlay" or "kmeans", for the record.
+    signals : {"anchor", "weighted"}
+        Adaptive signal average (adaptive schemes only).
     """
 
     x: np.ndarray
@@ -368,12 +375,13 @@ class MeshSourceModel:
     offset: str = "anchor"
     adapt_image: np.ndarray | None = None
     mesh: str = "overlay"
+    signals: str = "anchor"
 
     def build(self, values: Mapping[str, float]) -> PixelizedSource:
         return PixelizedSource(
             self.x,
             self.y,
-            regularization_from(values, self.regularization, self.offset),
+            regularization_from(values, self.regularization, self.offset, self.signals),
             self.interpolation,
             self.adapt_image,
         )
@@ -386,6 +394,7 @@ class MeshSourceModel:
             "regularization": self.regularization,
             "interpolation": self.interpolation,
             "cross_offset": self.offset,
+            **({"adaptive_signals": self.signals} if "adaptive" in self.regularization else {}),
         }
 
 
@@ -404,7 +413,8 @@ class KMeansSourceModel:
         Clusters and k-means seed.
     scheme : {"2023", "2024"}
         Weight formula (SPEC §4.1).
-    interpolation, offset : str
+    interpolation, offset, signals : str
+        As in :class:`MeshSourceModel`.
     """
 
     pixel_x: np.ndarray
@@ -415,6 +425,7 @@ class KMeansSourceModel:
     scheme: str = "2023"
     interpolation: str = "natural_neighbour"
     offset: str = "anchor"
+    signals: str = "anchor"
 
     def centres(self, values: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
         """Image-plane k-means centres for the weight hyper-parameters in ``values``.
@@ -435,7 +446,14 @@ class KMeansSourceModel:
         """The k-means mesh of ``values`` with the adaptive split regularization."""
         x, y = self.centres(values)
         return MeshSourceModel(
-            x, y, "adaptive_split", self.interpolation, self.offset, self.adapt_image, "kmeans"
+            x,
+            y,
+            "adaptive_split",
+            self.interpolation,
+            self.offset,
+            self.adapt_image,
+            "kmeans",
+            self.signals,
         )
 
     def fixed(self, values: Mapping[str, float]) -> "FixedSourceModel":
@@ -456,6 +474,7 @@ class KMeansSourceModel:
             "regularization": "adaptive_split",
             "interpolation": self.interpolation,
             "cross_offset": self.offset,
+            "adaptive_signals": self.signals,
         }
 
 

@@ -529,6 +529,7 @@ def _kmeans_source(
         settings.kmeans_scheme,
         settings.interpolation,
         settings.cross_offset,
+        settings.adaptive_signals,
     )
     return source, path
 

@@ -32,6 +32,7 @@ from types import MappingProxyType
 import yaml
 
 from mgelens.search.sampler import SamplerSettings
+from mgelens.source.regularization import SIGNAL_AVERAGES
 
 PHASES = ("sp", "spix1", "spix2", "light", "mass")
 """Phase names in chain order; each is also the name of the phase's result folder."""
@@ -92,6 +93,11 @@ class SlamSettings:
         Source-plane interpolation.
     cross_offset : {"anchor", "paper"}
         Cross-point offset of the split regularization (½√A or √(A/2), SPEC §5.3).
+    adaptive_signals : {"anchor", "weighted"}
+        How the adaptive regularization's pixel signals average the adapt image: per
+        sub-pixel count (SPEC §5.2, anchor) or weighted by the interpolation weights, which
+        is continuous as the mesh moves
+        (:func:`mgelens.source.regularization.adaptive_pixel_signals`).
     prior_passing : {"paper", "2024"}
         Prior-passing rule (SPEC §8.2).
     positions_penalty : bool
@@ -128,6 +134,7 @@ class SlamSettings:
     kmeans_seed: int = 0
     interpolation: str = "natural_neighbour"
     cross_offset: str = "anchor"
+    adaptive_signals: str = "anchor"
     prior_passing: str = "paper"
     positions_penalty: bool = False
     positions_factor: float = 3.0
@@ -152,6 +159,7 @@ class SlamSettings:
         _check_choice("kmeans_scheme", str(self.kmeans_scheme), KMEANS_SCHEMES)
         _check_choice("interpolation", self.interpolation, INTERPOLATIONS)
         _check_choice("cross_offset", self.cross_offset, CROSS_OFFSETS)
+        _check_choice("adaptive_signals", self.adaptive_signals, SIGNAL_AVERAGES)
         _check_choice("prior_passing", self.prior_passing, PRIOR_PASSING_RULES)
         if self.mask_radius is not None and not self.mask_radius > 0:
             raise SettingsError(f"mask_radius must be > 0 arcsec, got {self.mask_radius}")
