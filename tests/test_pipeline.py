@@ -702,12 +702,12 @@ def test_sersic_chain_refits_three_sersics_and_frees_them_with_the_mass(sersic_r
 
 
 def test_adaptive_signals_setting_reaches_the_pixelized_phases(sersic_run, mock_dir):
+    values = PhaseResult.read(sersic_run / "mass").max_likelihood
     for signals in ("anchor", "weighted"):
         settings = sersic_settings(adaptive_signals=signals)
         for problem in (phases.spix2_problem, phases.mass_problem):
             model = problem(mock_dir, sersic_run, settings).model
             assert model.describe()["source"]["adaptive_signals"] == signals
-            values = PhaseResult.read(sersic_run / "mass").max_likelihood
             assert model.build(values).source.regularization.signals == signals
 
 

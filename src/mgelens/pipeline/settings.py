@@ -151,7 +151,7 @@ class SlamSettings:
     def __post_init__(self):
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if f.type in (bool, "bool") and not isinstance(value, bool):
+            if f.type is bool and not isinstance(value, bool):
                 raise SettingsError(f"{f.name} must be true or false, got {value!r}")
         _check_choice("lens_light_model", self.lens_light_model, LENS_LIGHT_MODELS)
         _check_choice("mge_sets", self.mge_sets, MGE_SET_CHOICES)
