@@ -18,7 +18,7 @@ from mgelens.source.interpolate import (
     natural_neighbour_weights,
     nearest_cell_weights,
 )
-from mgelens.source.mesh import MeshError, VoronoiMesh
+from mgelens.source.mesh import RING_POINTS, RING_RADIUS, MeshError, VoronoiMesh
 
 # ----------------------------------------------------------------- brute-force Sibson oracle
 
@@ -269,3 +269,92 @@ def test_cross_points_sit_on_an_axis_aligned_cross(mesh, offset, delta):
 def test_cross_points_reject_an_unknown_offset(mesh):
     with pytest.raises(ValueError, match="anchor"):
         cross_points(mesh, "dual")
+
+
+# ------------------------------------------------------------- the continuous edge rule
+
+
+def continuous_mesh_of(points: np.ndarray) -> VoronoiMesh:
+    return VoronoiMesh.from_points(points[:, 0], points[:, 1], edge_rule="continuous")
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_continuous_rule_is_sibson_over_the_ringed_mesh_without_the_ring(seed):
+    points = random_disc(seed, 60)
+    mesh = continuous_mesh_of(points)
+    ring = mesh.ringed.points[mesh.n_points :]
+    assert len(ring) == RING_POINTS
+    centre = points.mean(axis=0)
+    np.testing.assert_allclose(
+        np.hypot(*(ring - centre).T), RING_RADIUS * np.hypot(*(points - centre).T).max()
+    )
+    rng = np.random.default_rng(seed)
+    queries = rng.uniform(-1.6, 1.6, (40, 2))  # inside and outside the hull of the points
+    weights = dense(mesh, queries)
+    for query, row in zip(queries, weights, strict=True):
+        expected = brute_force_sibson(mesh.ringed.points, query)[: mesh.n_points]
+        np.testing.assert_allclose(row, expected / expected.sum(), atol=1e-10)
+
+
+def test_continuous_rule_keeps_plain_sibson_weights_away_from_the_hull(mesh):
+    points = mesh.points
+    queries = inside_hull(points, random_disc(5, 3000), margin=0.15)
+    continuous = continuous_mesh_of(points)
+    np.testing.assert_allclose(dense(continuous, queries), dense(mesh, queries), atol=1e-12)
+
+
+def test_continuous_rule_weights_change_smoothly_across_the_hull(mesh):
+    """A query walking out through the hull in steps of 1e−4: the anchor's rows jump to the
+    nearest point at the crossing, the continuous rule's rows change by O(step)."""
+    continuous = continuous_mesh_of(mesh.points)
+    hull = ConvexHull(mesh.points)
+    a, b = mesh.points[hull.simplices[0]]
+    normal = hull.equations[0, :2]  # outward
+    queries = 0.5 * (a + b) + (np.arange(1000)[:, None] - 500) * 1e-4 * normal
+    anchor_steps = np.abs(np.diff(dense(mesh, queries), axis=0)).max(axis=1)
+    continuous_rows = dense(continuous, queries)
+    continuous_steps = np.abs(np.diff(continuous_rows, axis=0)).max(axis=1)
+    assert np.all(continuous_rows >= 0)
+    assert np.allclose(continuous_rows.sum(axis=1), 1.0)
+    assert anchor_steps.max() > 0.3
+    assert continuous_steps.max() < 0.01
+
+
+def test_continuous_rule_weights_change_smoothly_as_a_point_leaves_the_hull():
+    """A hull vertex moves inwards through the hull edge of its two neighbours: fixed
+    queries around it, inside and outside the hull, see continuous weights: halving the
+    step halves the largest change of a weight (Lipschitz), while the anchor's rows jump
+    by the same amount at any step."""
+    points = random_disc(3, 80)
+    hull = ConvexHull(points).vertices
+    k = hull[0]
+    a, b = points[hull[-1]], points[hull[1]]
+    foot = a + np.dot(points[k] - a, b - a) / np.dot(b - a, b - a) * (b - a)
+    paths = [points[k] + np.linspace(0.0, 1.3, n)[:, None] * (foot - points[k]) for n in (400, 799)]
+    queries = points[k] + 0.3 * (foot - points[k]) + 0.03 * random_disc(4, 50)
+    queries = np.vstack(
+        [queries, foot + 0.02 * (foot - points[k]) / np.linalg.norm(foot - points[k])]
+    )
+    steps = {}
+    for rule in ("anchor", "continuous"):
+        for path in paths:
+            rows = []
+            for position in path:
+                moved = points.copy()
+                moved[k] = position
+                mesh = VoronoiMesh.from_points(moved[:, 0], moved[:, 1], edge_rule=rule)
+                rows.append(dense(mesh, queries))
+            steps[rule, len(path)] = np.abs(np.diff(np.array(rows), axis=0)).max()
+    assert steps["anchor", 799] > 0.2
+    assert steps["anchor", 799] > 0.9 * steps["anchor", 400]
+    assert steps["continuous", 799] < 0.6 * steps["continuous", 400]
+    assert steps["continuous", 799] < 0.05
+
+
+def test_continuous_rule_outside_the_ring_falls_back_to_the_nearest_point(mesh):
+    continuous = continuous_mesh_of(mesh.points)
+    far = np.array([[40.0, 1.0], [-3.0, -60.0]])
+    rows = dense(continuous, far)
+    nearest = np.argmin(np.linalg.norm(mesh.points[None] - far[:, None], axis=2), axis=1)
+    np.testing.assert_array_equal(rows[np.arange(2), nearest], 1.0)
+    assert np.count_nonzero(rows) == 2

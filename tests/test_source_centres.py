@@ -125,11 +125,13 @@ def test_border_pixels_and_their_outermost_sub_pixels(inner):
     used = ~mask
     grid = sub_grid(x[used], y[used], 0.1, 4)
     border = border_sub_pixels(mask, grid.x, grid.y, 4, (0.0, 0.0))
-    assert border.size == pixels.size
+    assert np.sort(border // 16).tolist() == pixels.tolist()  # one per border pixel
     r_sub = np.hypot(grid.x, grid.y)
-    for pixel, index in zip(pixels, border, strict=True):
-        own = r_sub[pixel * 16 : (pixel + 1) * 16]
+    for index in border:
+        own = r_sub[index // 16 * 16 : (index // 16 + 1) * 16]
         assert r_sub[index] == own.max()
+    # in order along the mask edge (polar angle), the sides of the border polygon
+    assert np.all(np.diff(np.arctan2(grid.y[border], grid.x[border])) > 0)
 
 
 def test_relocation_pulls_outliers_onto_the_border_only():
@@ -145,3 +147,77 @@ def test_relocation_pulls_outliers_onto_the_border_only():
     # moved radially: direction kept
     assert np.allclose(np.arctan2(new_y[2:], new_x[2:]), np.arctan2(py[2:], px[2:]))
     assert px[2] == 3.0  # inputs untouched
+
+
+def regular_polygon_radius(theta: np.ndarray, n_sides: int) -> np.ndarray:
+    """Distance from the centre of the regular n-gon with vertices at angles 2πk/n on the
+    unit circle to its boundary in direction θ."""
+    half = np.pi / n_sides
+    offset = (theta % (2 * half)) - half  # angle from the nearest side's normal
+    return np.cos(half) / np.cos(offset)
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_polygon_rule_moves_points_onto_the_border_polygon(reverse):
+    n = 12
+    angles = 2 * np.pi * np.arange(n) / n
+    bx, by = np.cos(angles), np.sin(angles)
+    if reverse:  # clockwise order describes the same polygon
+        bx, by = bx[::-1], by[::-1]
+    rng = np.random.default_rng(2)
+    theta = rng.uniform(-np.pi, np.pi, 500)
+    r = rng.uniform(0.0, 3.0, 500)
+    px, py = r * np.cos(theta), r * np.sin(theta)
+    new_x, new_y = relocate_to_border(px, py, bx, by, rule="polygon")
+    boundary = regular_polygon_radius(theta, n)
+    outside = r > boundary
+    np.testing.assert_allclose(np.hypot(new_x, new_y)[outside], boundary[outside], rtol=1e-12)
+    np.testing.assert_allclose(np.arctan2(new_y, new_x)[outside], theta[outside], atol=1e-12)
+    np.testing.assert_array_equal(new_x[~outside], px[~outside])
+    # the anchor's rule leaves points between the polygon and the vertex radius 1 alone
+    anchor_x, anchor_y = relocate_to_border(px, py, bx, by)
+    assert np.all(np.hypot(anchor_x, anchor_y) <= 1.0 + 1e-12)
+    assert np.any(np.hypot(anchor_x, anchor_y)[outside] > boundary[outside] + 1e-3)
+
+
+def test_polygon_rule_on_a_polygon_that_is_not_star_shaped_takes_the_farthest_crossing():
+    # a square with a notch whose walls fold back in angle, seen from the mean vertex
+    bx = np.array([1.0, 1.0, -0.2, 0.9, -1.0, -1.0, 1.0])
+    by = np.array([-1.0, 1.0, 1.0, 0.2, 1.0, -1.0, -1.0])[:-1]
+    bx = bx[:-1]
+    px, py = np.array([0.3, 5.0, 0.0]), np.array([5.0, 0.5, -4.0])
+    ox, oy = bx.mean(), by.mean()
+    expected = []
+    for x, y in zip(px, py, strict=True):
+        u = np.array([x - ox, y - oy]) / np.hypot(x - ox, y - oy)
+        crossings = []
+        for k in range(bx.size):
+            a = np.array([bx[k], by[k]])
+            e = np.array([bx[(k + 1) % bx.size], by[(k + 1) % by.size]]) - a
+            s, t = np.linalg.solve(np.column_stack([u, -e]), a - np.array([ox, oy]))
+            if s > 0 and 0 <= t <= 1:
+                crossings.append(s)
+        expected.append(max(crossings))
+    new_x, new_y = relocate_to_border(px, py, bx, by, rule="polygon")
+    np.testing.assert_allclose(np.hypot(new_x - ox, new_y - oy), expected, rtol=1e-12)
+
+
+def test_polygon_rule_is_continuous_and_the_nearest_point_rule_is_not():
+    """A point circling outside an elliptical border in steps of 1e−4 rad: its relocated
+    position moves by O(step) under the polygon rule; under the anchor's rule it jumps
+    whenever its nearest border point changes."""
+    angles = np.linspace(-np.pi, np.pi, 80, endpoint=False)
+    bx, by = 2.0 * np.cos(angles), np.sin(angles)
+    theta = np.arange(0.0, 2.0, 1e-4)
+    px, py = 3.0 * np.cos(theta), 3.0 * np.sin(theta)
+    jumps = {}
+    for rule in ("nearest_point", "polygon"):
+        new_x, new_y = relocate_to_border(px, py, bx, by, rule=rule)
+        jumps[rule] = np.hypot(np.diff(new_x), np.diff(new_y)).max()
+    assert jumps["nearest_point"] > 0.01
+    assert jumps["polygon"] < 3e-4
+
+
+def test_an_unknown_border_rule_is_refused():
+    with pytest.raises(ValueError, match="border rule"):
+        relocate_to_border(np.zeros(3), np.zeros(3), np.ones(4), np.ones(4), rule="radial")

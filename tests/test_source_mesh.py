@@ -6,6 +6,7 @@ from scipy.spatial import ConvexHull, Voronoi
 
 from mgelens.source.mesh import (
     AREA_PERCENTILE,
+    EDGE_RULES,
     MeshError,
     VoronoiMesh,
     triangle_doubled_areas,
@@ -151,3 +152,43 @@ def test_mesh_error_is_a_value_error_and_shapes_are_checked():
     assert issubclass(MeshError, ValueError)
     with pytest.raises(ValueError, match="equal length"):
         VoronoiMesh.from_points(np.zeros(4), np.zeros(5))
+
+
+def test_continuous_rule_takes_the_areas_of_the_ringed_mesh(random_mesh):
+    x, y = random_mesh.points.T
+    continuous = VoronoiMesh.from_points(x, y, edge_rule="continuous")
+    ringed = continuous.ringed
+    np.testing.assert_array_equal(ringed.points[: len(x)], random_mesh.points)
+    assert not ringed.edge_pixels[: len(x)].any()  # every real cell is bounded
+    cells = voronoi_cell_areas(ringed.points, ringed.simplices, ringed.circumcentres)[: len(x)]
+    cap = np.percentile(cells, AREA_PERCENTILE)
+    np.testing.assert_allclose(continuous.areas, np.minimum(cells, cap))
+    # cells far from the hull are the same under both rules (below both caps)
+    inner = (np.hypot(x, y) < 0.6) & (continuous.areas < random_mesh.areas.max())
+    assert inner.sum() > 50
+    np.testing.assert_allclose(continuous.areas[inner], random_mesh.areas[inner], rtol=1e-12)
+
+
+def test_the_continuous_area_cap_does_not_jump_when_a_point_joins_the_hull():
+    """A point walks outwards through a hull edge. The anchor's cap (the largest area)
+    drops by one percentile rank at the crossing whatever the step; the continuous rule's
+    cap changes by less when the step is halved (it is continuous)."""
+    x, y = random_disc(5, 120)
+    points = np.column_stack([x, y])
+    hull = ConvexHull(points)
+    a, b = points[hull.simplices[0]]
+    target = 0.5 * (a + b) + 0.02 * hull.equations[0, :2]
+    interior = np.flatnonzero(~VoronoiMesh.from_points(x, y).edge_pixels)
+    k = interior[np.argmin(np.linalg.norm(points[interior] - 0.5 * (a + b), axis=1))]
+    largest = {}
+    for rule in EDGE_RULES:
+        for n_steps in (200, 399):
+            caps = []
+            for f in np.linspace(0.0, 1.0, n_steps):
+                moved = points.copy()
+                moved[k] = (1 - f) * points[k] + f * target
+                caps.append(VoronoiMesh.from_points(*moved.T, edge_rule=rule).areas.max())
+            largest[rule, n_steps] = np.abs(np.diff(caps)).max() / np.median(caps)
+    assert largest["anchor", 399] > 0.01
+    assert largest["anchor", 399] > 0.9 * largest["anchor", 200]
+    assert largest["continuous", 399] < 0.6 * largest["continuous", 200]

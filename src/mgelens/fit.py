@@ -36,9 +36,11 @@ from mgelens.source.border import border_sub_pixels, relocate_to_border
 from mgelens.source.image_mesh import mask_extent_centre
 from mgelens.source.interpolate import natural_neighbour_weights, nearest_cell_weights
 from mgelens.source.mapping import SourceWeights, mapping_matrix
-from mgelens.source.mesh import MeshError, VoronoiMesh
+from mgelens.source.mesh import EDGE_RULES, MeshError, VoronoiMesh
 
 INTERPOLATIONS = ("natural_neighbour", "nearest")
+
+BORDER_RULE_OF_EDGE_RULE = {"anchor": "nearest_point", "continuous": "polygon"}
 
 FitError = (MeshError, InversionError, np.linalg.LinAlgError, FloatingPointError)
 """Exceptions that mean "this sample cannot be fitted" rather than a programming error."""
@@ -63,6 +65,17 @@ class FitSettings:
         μ added to the curvature diagonal of unregularized linear columns (1e−3).
     force_edge_pixels_to_zero : bool
         Fix convex-hull source pixels to zero in the non-negative solve (SPEC §6.3).
+    edge_rule : {"anchor", "continuous"}
+        How the source mesh treats its edges. ``"anchor"`` (SPEC §4.2–4.4): border radius
+        of the nearest border point, queries outside the hull take their nearest mesh
+        point, unbounded cells count as −1 in the area percentile; each makes the log
+        evidence jump as the mass model moves a point across a hull, border or
+        nearest-point boundary. ``"continuous"``: the border polygon's radius
+        (:func:`~mgelens.source.border.relocate_to_border`), Sibson weights over the mesh
+        embedded in a distant ring (:mod:`mgelens.source.interpolate`) and unbounded cells
+        as +∞ (:func:`~mgelens.source.mesh.capped_areas`): the evidence is then continuous
+        in the mass parameters, provided ``force_edge_pixels_to_zero`` is off (hull
+        membership is discrete) and adaptive regularization uses ``signals="weighted"``.
     psf_trim : float
         The PSF is cut to the smallest centred kernel holding every entry ≥ this fraction
         of its peak (:func:`mgelens.convolve.trimmed_psf`; 0 keeps it whole). The default
@@ -77,7 +90,12 @@ class FitSettings:
     use_border: bool = True
     mge_diagonal: float = 1e-3
     force_edge_pixels_to_zero: bool = True
+    edge_rule: str = "anchor"
     psf_trim: float = 1e-10
+
+    def __post_init__(self):
+        if self.edge_rule not in EDGE_RULES:
+            raise ValueError(f"edge_rule must be one of {EDGE_RULES}, got {self.edge_rule!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -348,8 +366,9 @@ def _traced_source_positions(dataset: FitDataset, mass, source: PixelizedSource)
     mx, my = mass_module.ray_trace(mass, source.image_plane_x, source.image_plane_y)
     if dataset.settings.use_border:
         border_x, border_y = bx[dataset.border], by[dataset.border]
-        bx, by = relocate_to_border(bx, by, border_x, border_y)
-        mx, my = relocate_to_border(mx, my, border_x, border_y)
+        rule = BORDER_RULE_OF_EDGE_RULE[dataset.settings.edge_rule]
+        bx, by = relocate_to_border(bx, by, border_x, border_y, rule)
+        mx, my = relocate_to_border(mx, my, border_x, border_y, rule)
     return bx, by, mx, my
 
 
@@ -411,7 +430,7 @@ class SourceSystem:
 def pixelized_operator(dataset: FitDataset, mass, source: PixelizedSource) -> SourceOperator:
     """Trace, mesh, interpolate, blur and regularize a pixelized source (SPEC §4–5)."""
     bx, by, mx, my = _traced_source_positions(dataset, mass, source)
-    mesh = VoronoiMesh.from_points(mx, my)
+    mesh = VoronoiMesh.from_points(mx, my, dataset.settings.edge_rule)
     interpolate = (
         natural_neighbour_weights
         if source.interpolation == "natural_neighbour"

@@ -24,6 +24,15 @@ in this order:
    weights in [−1e−12, 0] are round-off of a vanishing weight and are dropped (the row is
    then renormalised), so that rows stay continuous in x.
 
+Rule 1 makes rows jump when the nearest point changes and when a point joins or leaves the
+hull. A mesh built with ``edge_rule="continuous"`` replaces it: the weights are Sibson
+weights over the mesh embedded in a distant ring of auxiliary points
+(:attr:`~mgelens.source.mesh.VoronoiMesh.ringed`), with the ring's share dropped and each
+row renormalised. They equal the plain Sibson weights wherever x's cavity does not reach
+the ring (all but a thin band inside the hull), are continuous in x and in the mesh points
+everywhere inside the ring, and extend smoothly beyond the hull; only queries outside the
+ring itself fall back to the nearest mesh point.
+
 Point location is a visibility walk started from a bucket grid of triangle centroids, with
 orientation tests that agree exactly on shared edges; the nearest mesh point comes from a
 greedy descent on the Delaunay graph (exact on a Delaunay triangulation). The kernels are
@@ -105,6 +114,8 @@ def natural_neighbour_weights(
     if max_neighbours < 3:
         raise ValueError(f"max_neighbours must be at least 3, got {max_neighbours}")
     qx, qy = _validated_queries(qx, qy)
+    if mesh.edge_rule == "continuous":
+        return _without_ring(mesh, qx, qy, *natural_neighbour_weights(mesh.ringed, qx, qy))
     geometry = _geometry(mesh)
     params = _query_params(mesh)
     bounds = _task_bounds(qx.size)
@@ -165,6 +176,54 @@ def nearest_cell_weights(
     )
     indptr = np.arange(qx.size + 1, dtype=np.int64)
     return indptr, indices, np.ones(qx.size, dtype=np.float64)
+
+
+def _without_ring(
+    mesh: VoronoiMesh,
+    qx: np.ndarray,
+    qy: np.ndarray,
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    weights: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows over ``mesh.ringed`` restricted to the real points and renormalised.
+
+    A row left empty (a query outside the ring, which fell back to a ring point) takes
+    weight 1 on the nearest real mesh point.
+    """
+    new_indptr, indices, weights = _drop_ring(indptr, indices, weights, mesh.n_points)
+    lost = np.flatnonzero(np.diff(new_indptr) == 0)
+    if lost.size == 0:
+        return new_indptr, indices, weights
+    nearest = nearest_cell_weights(mesh, qx[lost], qy[lost])[1]
+    counts = np.diff(new_indptr)
+    counts[lost] = 1
+    at = new_indptr[lost + 1]  # where each lost row's entry goes among the kept ones
+    np.cumsum(counts, out=new_indptr[1:])
+    return new_indptr, np.insert(indices, at, nearest), np.insert(weights, at, 1.0)
+
+
+@_kernel
+def _drop_ring(indptr, indices, weights, n_real):
+    """Rows without the entries ≥ ``n_real``, renormalised (an emptied row stays empty)."""
+    n_queries = indptr.size - 1
+    new_indptr = np.zeros(n_queries + 1, dtype=np.int64)
+    new_indices = np.empty(indices.size, dtype=np.int64)
+    new_weights = np.empty(weights.size, dtype=np.float64)
+    n = 0
+    for q in range(n_queries):
+        start = n
+        total = 0.0
+        for k in range(indptr[q], indptr[q + 1]):
+            if indices[k] < n_real:
+                new_indices[n] = indices[k]
+                new_weights[n] = weights[k]
+                total += weights[k]
+                n += 1
+        for k in range(start, n):
+            new_weights[k] /= total
+        new_indptr[q + 1] = n
+    return new_indptr, new_indices[:n], new_weights[:n]
 
 
 def cross_points(mesh: VoronoiMesh, offset: str = "anchor") -> np.ndarray:

@@ -10,6 +10,12 @@ Conventions:
   (convex-hull vertices and points lying on hull edges); these are the ``edge_pixels``.
 * Cell areas in arcsec²: bounded cells exactly, unbounded cells and every area above it
   set to the 90th percentile of the bounded areas (anchor ``voronoi_pixel_areas``).
+* ``edge_rule`` chooses how the mesh treats its convex hull: ``"anchor"`` (SPEC §4.3–4.4)
+  or ``"continuous"``. The continuous rule embeds the points in a distant ring of
+  auxiliary points (:attr:`VoronoiMesh.ringed`), inside which every real cell is bounded:
+  areas are those cells' (then capped at their 90th percentile) and interpolation weights
+  are Sibson weights over the ringed mesh, so both vary continuously as points join or
+  leave the hull.
 
 Degenerate input (fewer than 3 points, non-finite, duplicate or Qhull-merged points, all
 points collinear, no interior point) raises :class:`MeshError`, which a sampler catches to
@@ -30,8 +36,18 @@ regular lattices; flat (collinear) input raises ``QhullError``.
 """
 
 AREA_PERCENTILE = 90.0
-"""Percentile of the cell areas (unbounded cells counted as −1) used for unbounded cells
-and as the area cap."""
+"""Percentile of the cell areas used for unbounded cells and as the area cap."""
+
+EDGE_RULES = ("anchor", "continuous")
+"""Treatments of the convex hull: the anchor's (discontinuous when a point joins or leaves
+the hull) or the continuous one (:attr:`VoronoiMesh.ringed`)."""
+
+RING_POINTS = 32
+"""Auxiliary points of the ring that embeds a mesh under the continuous edge rule."""
+
+RING_RADIUS = 4.0
+"""Radius of that ring, in units of the largest distance of a mesh point from the mesh
+centroid: far enough that only queries near the hull feel it."""
 
 
 class MeshError(ValueError):
@@ -66,7 +82,17 @@ class VoronoiMesh:
     edge_pixels : ndarray (N_S,), bool
         True for points on the triangulation boundary (unbounded Voronoi cells).
     areas : ndarray (N_S,), float64
-        Voronoi cell areas, arcsec², with the 90th-percentile rule of §4.3.
+        Voronoi cell areas, arcsec², with the 90th-percentile rule of §4.3; under the
+        continuous rule, the cells of :attr:`ringed`, all bounded, capped at their 90th
+        percentile.
+    edge_rule : {"anchor", "continuous"}
+        Treatment of the convex hull (:data:`EDGE_RULES`).
+    ringed : VoronoiMesh or None
+        Continuous rule only: the mesh of these points followed by :data:`RING_POINTS`
+        points on a circle about their centroid, :data:`RING_RADIUS` times their largest
+        distance from it. Sibson weights over it with the ring's share dropped are
+        continuous across the hull of the real points
+        (:func:`mgelens.source.interpolate.natural_neighbour_weights`).
     """
 
     points: np.ndarray
@@ -80,6 +106,8 @@ class VoronoiMesh:
     neighbour_indices: np.ndarray
     edge_pixels: np.ndarray
     areas: np.ndarray
+    edge_rule: str = "anchor"
+    ringed: "VoronoiMesh | None" = None
 
     @property
     def n_points(self) -> int:
@@ -92,7 +120,7 @@ class VoronoiMesh:
         return float(np.ptp(self.points, axis=0).max())
 
     @classmethod
-    def from_points(cls, x: np.ndarray, y: np.ndarray) -> "VoronoiMesh":
+    def from_points(cls, x: np.ndarray, y: np.ndarray, edge_rule: str = "anchor") -> "VoronoiMesh":
         """Triangulate the mesh centres ``(x, y)`` (arcsec) and derive the Voronoi cells.
 
         Raises
@@ -100,6 +128,8 @@ class VoronoiMesh:
         MeshError
             If the points cannot form a mesh (see the module docstring).
         """
+        if edge_rule not in EDGE_RULES:
+            raise ValueError(f"edge_rule must be one of {EDGE_RULES}, got {edge_rule!r}")
         points = _validated_points(x, y)
         delaunay = _triangulate(points)
         simplices, neighbors = _counter_clockwise(points, delaunay.simplices, delaunay.neighbors)
@@ -109,7 +139,13 @@ class VoronoiMesh:
         edge_pixels = boundary_vertices(simplices, neighbors, len(points))
         if edge_pixels.all():
             raise MeshError("every mesh point lies on the convex hull: no bounded Voronoi cell")
-        areas = capped_areas(voronoi_cell_areas(points, simplices, circumcentres), edge_pixels)
+        if edge_rule == "anchor":
+            ringed = None
+            areas = capped_areas(voronoi_cell_areas(points, simplices, circumcentres), edge_pixels)
+        else:
+            ringed = cls.from_points(*_with_ring(points).T)
+            cells = voronoi_cell_areas(ringed.points, ringed.simplices, ringed.circumcentres)
+            areas = capped_areas(cells[: len(points)], np.zeros(len(points), dtype=bool))
         return cls(
             points=points,
             delaunay=delaunay,
@@ -122,7 +158,17 @@ class VoronoiMesh:
             neighbour_indices=indices,
             edge_pixels=edge_pixels,
             areas=areas,
+            edge_rule=edge_rule,
+            ringed=ringed,
         )
+
+
+def _with_ring(points: np.ndarray) -> np.ndarray:
+    """``points`` followed by the ring of :attr:`VoronoiMesh.ringed`."""
+    centre = points.mean(axis=0)
+    radius = RING_RADIUS * np.hypot(*(points - centre).T).max()
+    angle = 2.0 * np.pi * (np.arange(RING_POINTS) + 0.5) / RING_POINTS
+    return np.vstack([points, centre + radius * np.column_stack([np.cos(angle), np.sin(angle)])])
 
 
 def _validated_points(x: np.ndarray, y: np.ndarray) -> np.ndarray:
