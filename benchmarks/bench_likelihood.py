@@ -200,6 +200,12 @@ def main() -> None:
         return fit(pn, model)
 
     report("likelihood_R_nnls_off_s", median_time(unconstrained, repeats=5))
+    continuous = FitDataset.from_imaging(
+        imaging,
+        settings=replace(FitSettings(), edge_rule="continuous", force_edge_pixels_to_zero=False),
+        light_centre=(0.01, -0.02),
+    )
+    report("likelihood_R_continuous_edges_s", median_time(lambda: fresh_fit(continuous, model), 7))
     stages = [breakdown(dataset, model) for _ in range(5)]
     for name in stages[0]:
         report(f"stage_{name}_s", float(np.median([s[name] for s in stages])))

@@ -338,13 +338,19 @@ def test_profiles_paper_and_quick():
 
 
 def test_fit_settings_reach_the_fit(mock_dir):
-    for trim, force_edge in ((1e-10, True), (1e-4, False)):
+    for trim, force_edge, rule in ((1e-10, True, "anchor"), (1e-4, False, "continuous")):
         settings = settings_from_mapping(
-            {"mask_radius": MASK_RADIUS, "psf_trim": trim, "force_edge_pixels_to_zero": force_edge}
+            {
+                "mask_radius": MASK_RADIUS,
+                "psf_trim": trim,
+                "force_edge_pixels_to_zero": force_edge,
+                "edge_rule": rule,
+            }
         )
         dataset, _ = phases.load_dataset(mock_dir, settings, (0.0, 0.0))
         assert dataset.settings.psf_trim == trim
         assert dataset.settings.force_edge_pixels_to_zero is force_edge
+        assert dataset.settings.edge_rule == rule
 
 
 def test_settings_from_yaml_override_the_profile(tmp_path):
@@ -393,6 +399,7 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"positive_only": "false"}, "positive_only must be true or false, got 'false'"),
         ({"force_edge_pixels_to_zero": 0}, "force_edge_pixels_to_zero must be true or false"),
         ({"adaptive_signals": "mean"}, "adaptive_signals must be one of"),
+        ({"edge_rule": "smooth"}, "edge_rule must be one of"),
     ],
 )
 def test_invalid_settings_name_the_key(section, message):

@@ -191,6 +191,7 @@ def load_dataset(
         lp_centre_radius=settings.lp_centre_radius,
         use_border=settings.use_border,
         force_edge_pixels_to_zero=settings.force_edge_pixels_to_zero,
+        edge_rule=settings.edge_rule,
         psf_trim=settings.psf_trim,
     )
     return FitDataset.from_imaging(imaging, mask, fit_settings, light_centre), radius

@@ -32,6 +32,7 @@ from types import MappingProxyType
 import yaml
 
 from mgelens.search.sampler import SamplerSettings
+from mgelens.source.mesh import EDGE_RULES
 from mgelens.source.regularization import SIGNAL_AVERAGES
 
 PHASES = ("sp", "spix1", "spix2", "light", "mass")
@@ -109,6 +110,11 @@ class SlamSettings:
     force_edge_pixels_to_zero : bool
         Fix the convex-hull source pixels to zero in the non-negative solve (SPEC §6.3, the
         anchor's default since 2023). Off, the hull pixels are solved like the others.
+    edge_rule : {"anchor", "continuous"}
+        How the source mesh treats its hull and the mask border (:class:`mgelens.fit.FitSettings`):
+        the anchor's rules (SPEC §4.2–4.4), or continuous ones under which the evidence is
+        a continuous function of the mass parameters (with ``force_edge_pixels_to_zero``
+        off and, for adaptive regularization, ``adaptive_signals: weighted``).
     sub_size, lp_sub_size, lp_sub_size_centre, lp_centre_radius, use_border, psf_trim
         Fit settings (:class:`mgelens.fit.FitSettings`). ``psf_trim`` cuts the PSF to the
         kernel holding every entry ≥ that fraction of its peak: 1e−10 (paper) changes no
@@ -140,6 +146,7 @@ class SlamSettings:
     positions_factor: float = 3.0
     positions_minimum: float = 0.2
     force_edge_pixels_to_zero: bool = True
+    edge_rule: str = "anchor"
     sub_size: int = 4
     lp_sub_size: int = 4
     lp_sub_size_centre: int = 16
@@ -160,6 +167,7 @@ class SlamSettings:
         _check_choice("interpolation", self.interpolation, INTERPOLATIONS)
         _check_choice("cross_offset", self.cross_offset, CROSS_OFFSETS)
         _check_choice("adaptive_signals", self.adaptive_signals, SIGNAL_AVERAGES)
+        _check_choice("edge_rule", self.edge_rule, EDGE_RULES)
         _check_choice("prior_passing", self.prior_passing, PRIOR_PASSING_RULES)
         if self.mask_radius is not None and not self.mask_radius > 0:
             raise SettingsError(f"mask_radius must be > 0 arcsec, got {self.mask_radius}")
