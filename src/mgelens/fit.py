@@ -71,9 +71,9 @@ class FitSettings:
         point, unbounded cells count as −1 in the area percentile; each makes the log
         evidence jump as the mass model moves a point across a hull, border or
         nearest-point boundary. ``"continuous"``: the border polygon's radius
-        (:func:`~mgelens.source.border.relocate_to_border`), Sibson weights over the mesh
-        embedded in a distant ring (:mod:`mgelens.source.interpolate`) and unbounded cells
-        as +∞ (:func:`~mgelens.source.mesh.capped_areas`): the evidence is then continuous
+        (:func:`~mgelens.source.border.relocate_to_border`), and Sibson weights and cell
+        areas of the mesh embedded in a distant ring of auxiliary points
+        (:attr:`~mgelens.source.mesh.VoronoiMesh.ringed`): the evidence is then continuous
         in the mass parameters, provided ``force_edge_pixels_to_zero`` is off (hull
         membership is discrete) and adaptive regularization uses ``signals="weighted"``.
     psf_trim : float
