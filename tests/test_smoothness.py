@@ -84,9 +84,9 @@ def m1_setup(request, m1_dataset):
 @pytest.fixture(scope="module")
 def continuous_dataset(m1_dataset):
     """The same mock, mask and settings with the continuous edge rule."""
-    dataset = m1_dataset[0]
+    dataset, lens, _ = m1_dataset
     settings = replace(dataset.settings, edge_rule="continuous")
-    centre = tuple(paper_mock("M1").mass[0].centre)
+    centre = tuple(lens.mass[0].centre)
     return FitDataset.from_imaging(dataset.imaging, dataset.mask, settings, light_centre=centre)
 
 

@@ -96,26 +96,20 @@ def relocate_to_border(
     ox, oy = border_x.mean(), border_y.mean()
     border_r = np.hypot(border_x - ox, border_y - oy)
     r = np.hypot(x - ox, y - oy)
-    inner = (
-        border_r.min()
-        if rule == "nearest_point"
-        else _polygon_inner_radius(border_x - ox, border_y - oy)
-    )
-    candidates = np.flatnonzero(r > inner)
-    new_x, new_y = np.array(x, dtype=float), np.array(y, dtype=float)
-    if candidates.size == 0:
-        return new_x, new_y
     if rule == "nearest_point":
+        candidates = np.flatnonzero(r > border_r.min())
         tree = cKDTree(np.column_stack([border_x, border_y]))
         _, nearest = tree.query(np.column_stack([x[candidates], y[candidates]]))
         radius = border_r[nearest]
     else:
+        candidates = np.flatnonzero(r > _polygon_inner_radius(border_x - ox, border_y - oy))
         radius = _polygon_radius(
             x[candidates] - ox, y[candidates] - oy, border_x - ox, border_y - oy
         )
     factor = radius / r[candidates]
     move = factor < 1.0
     idx = candidates[move]
+    new_x, new_y = np.array(x, dtype=float), np.array(y, dtype=float)
     new_x[idx] = ox + factor[move] * (x[idx] - ox)
     new_y[idx] = oy + factor[move] * (y[idx] - oy)
     return new_x, new_y
