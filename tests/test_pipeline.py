@@ -273,8 +273,10 @@ def test_mass_profiles_map_sie_epl_and_shear():
     assert isinstance(epl, EPL)
     assert epl.slope == 2.1
     assert epl.einstein_radius == 1.2
+    steep, _ = models.mass_profiles({**SP_VALUES, "mass.slope": 2.95})  # inside U(1.5, 3)
+    assert steep.slope == 2.95
     with pytest.raises(models.UnphysicalSample, match="slope"):
-        models.mass_profiles({**SP_VALUES, "mass.slope": 2.9})
+        models.mass_profiles({**SP_VALUES, "mass.slope": 3.0})
 
 
 def test_phase_model_builds_the_lens_model():

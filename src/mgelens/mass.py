@@ -45,8 +45,8 @@ SERIES_MAX_TERMS = 200
 _CHUNK = 256
 """Points per parallel work item of the EPL kernel."""
 
-SLOPE_RANGE = (1.2, 2.8)
-"""Open interval of valid EPL slopes γ."""
+SLOPE_RANGE = (1.2, 3.0)
+"""Open interval of valid EPL slopes γ (κ ∝ η^{1−γ}; the mass inside η diverges at γ = 3)."""
 
 
 class MassProfile(Protocol):
@@ -238,7 +238,7 @@ class EPL:
     angle : float
         Major-axis position angle φ, degrees counter-clockwise from +x.
     slope : float
-        Logarithmic 3D density slope γ, 1.2 < γ < 2.8 (γ = 2 is the SIE).
+        Logarithmic 3D density slope γ, 1.2 < γ < 3 (γ = 2 is the SIE).
     """
 
     centre: tuple[float, float] = (0.0, 0.0)

@@ -71,7 +71,7 @@ PASSED_MASS_NAMES = (
 
 
 class UnphysicalSample(ValueError):
-    """Parameter values the profiles cannot represent (e.g. an EPL slope ≥ 2.8)."""
+    """Parameter values the profiles cannot represent (e.g. an EPL slope ≥ 3)."""
 
 
 # -- lens light -------------------------------------------------------------------------
@@ -220,7 +220,7 @@ def mass_profiles(values: Mapping[str, float]) -> tuple:
     Raises
     ------
     UnphysicalSample
-        If the slope lies outside the EPL's valid range (1.2, 2.8) (:data:`SLOPE_RANGE`).
+        If the slope lies outside the EPL's valid range (1.2, 3) (:data:`SLOPE_RANGE`).
     """
     centre = (values["mass.centre_x"], values["mass.centre_y"])
     ell_comps = (values["mass.ell_comps_1"], values["mass.ell_comps_2"])
