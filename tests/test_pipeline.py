@@ -1,6 +1,7 @@
 """SLaM pipeline: parameter spaces, values → profiles, prior passing, settings, products,
 a tiny end-to-end SP phase and checkpoint resume (SPEC §8)."""
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -521,6 +522,32 @@ def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):
     assert "phase sp" in (folder / "phase.log").read_text()
     positions = summary["max_likelihood_fit"]["positions"]
     assert positions["threshold"] >= 0.2
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"spix1_regularization": "constant_split"},  # same parameter space, other prior
+        {"interpolation": "nearest"},
+        {"overlay_shape": (20, 20)},
+        {"positions_penalty": False},
+        {"mask_radius": 1.2},
+        {"sub_size": 2},
+    ],
+)
+def test_checkpoint_fingerprint_follows_every_input_of_the_likelihood(sp_run, mock_dir, changes):
+    """A checkpoint written for one likelihood must not resume another (SPix1 here)."""
+    results, _ = sp_run
+
+    def fingerprint(settings):
+        problem = phases.PROBLEMS["spix1"](mock_dir, results, settings)
+        sampler = phases.sampler_for(settings.samplers["spix1"], problem.space.n_free)
+        return phases.checkpoint_fingerprint(problem, sampler, 0, {})
+
+    base = tiny_settings()
+    assert base.positions_penalty
+    assert fingerprint(base) == fingerprint(tiny_settings())
+    assert fingerprint(dataclasses.replace(base, **changes)) != fingerprint(base)
 
 
 def test_lens_light_and_mass_models_rebuild_from_json(sp_run):

@@ -45,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mgelens import __version__
 from mgelens import mask as mask_module
 from mgelens.atomic import atomic_path, write_json
 from mgelens.fit import FitDataset, FitResult, FitSettings, MGESource, figure_of_merit, fit
@@ -279,6 +280,31 @@ def sampler_for(settings: SamplerSettings, n_free: int) -> SamplerSettings:
     return settings
 
 
+def checkpoint_fingerprint(
+    problem: PhaseProblem, sampler: SamplerSettings, seed: int, checksums: dict
+) -> dict:
+    """Everything a phase's sampling depends on, for naming its checkpoint: a checkpoint
+    resumes only a fit of the same likelihood, priors, sampler and seed.
+
+    Holds the parameter space, the model (lens-light sets, source mesh, regularization,
+    interpolation), the fit settings, a hash of the mask, the positions penalty, the
+    sampler settings, the seed, the input checksums and the package version.
+    """
+    mask = np.ascontiguousarray(problem.dataset.mask)
+    return {
+        "phase": problem.name,
+        "space": problem.space.to_dict(),
+        "model": problem.model.describe(),
+        "sampler": sampler.result_settings(),
+        "seed": seed,
+        "fit": dataclasses.asdict(problem.dataset.settings),
+        "mask": hashlib.sha256(mask.tobytes() + str(mask.shape).encode()).hexdigest(),
+        "positions": None if problem.positions is None else problem.positions.describe(),
+        "inputs": checksums,
+        "version": __version__,
+    }
+
+
 def _checkpoint_path(folder: Path, fingerprint: dict) -> Path:
     """Checkpoint file named by the hash of ``fingerprint``; other checkpoints are removed."""
     digest = hashlib.sha256(json.dumps(fingerprint, sort_keys=True).encode()).hexdigest()[:16]
@@ -373,15 +399,7 @@ def _solve(
 ) -> PhaseResult:
     checksums = input_checksums(problem.inputs)
     sampler = sampler_for(settings.samplers[problem.name], problem.space.n_free)
-    fingerprint = {
-        "phase": problem.name,
-        "space": problem.space.to_dict(),
-        "sampler": sampler.result_settings(),
-        "seed": seed,
-        "fit": dataclasses.asdict(problem.dataset.settings),
-        "inputs": checksums,
-    }
-    checkpoint = _checkpoint_path(folder, fingerprint)
+    checkpoint = _checkpoint_path(folder, checkpoint_fingerprint(problem, sampler, seed, checksums))
     logger.info(
         "phase %s of %s: %d free parameters, %s with n_live = %d, %d image pixels",
         problem.name,
