@@ -274,6 +274,20 @@ def test_degenerate_mesh_is_rejected_not_raised():
     assert "MeshError" in reason
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_log_evidence_is_rejected_not_returned(monkeypatch, bad):
+    """A numerical failure that raises nothing must not reach the sampler (SPEC §8.4)."""
+    import mgelens.fit as fit_module
+
+    class Result:
+        log_evidence = bad
+
+    monkeypatch.setattr(fit_module, "fit", lambda dataset, model: Result())
+    value, reason = figure_of_merit(make_dataset(), LensModel(lens_light=lens_sets()))
+    assert value == REJECTED_LOG_LIKELIHOOD
+    assert reason == f"log evidence is {bad}"
+
+
 def test_model_without_linear_light_is_a_clear_error():
     with pytest.raises(ValueError, match="no linear light"):
         fit(make_dataset(np.ones(SHAPE)), LensModel(mass=MASS))

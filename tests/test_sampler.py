@@ -300,6 +300,9 @@ def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
     assert resumed.n_calls == reference.n_calls
     with pytest.raises(CheckpointMismatchError, match="seed"):
         run_nested(failing_likelihood, SPACE, settings, checkpoint, 5, lambda _: None)
+    written.with_suffix(".fingerprint.json").unlink()  # e.g. a copied or older folder
+    with pytest.raises(CheckpointMismatchError, match=r"no sampler\.fingerprint\.json"):
+        run_nested(failing_likelihood, SPACE, settings, checkpoint, 4, lambda _: None)
 
 
 def test_sample_method_resolution():

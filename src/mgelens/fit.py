@@ -550,8 +550,13 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
 
 
 def figure_of_merit(dataset: FitDataset, model: LensModel) -> tuple[float, str]:
-    """Log evidence of ``model``, or (−1e99, reason) if the sample must be rejected."""
+    """Log evidence of ``model``, or (−1e99, reason) if the sample must be rejected: the
+    fit raised one of :data:`FitError`, or a numerical failure that raised nothing left
+    the log evidence NaN or infinite (SPEC §8.4)."""
     try:
-        return fit(dataset, model).log_evidence, ""
+        value = fit(dataset, model).log_evidence
     except FitError as error:
         return REJECTED_LOG_LIKELIHOOD, f"{type(error).__name__}: {error}"
+    if not np.isfinite(value):
+        return REJECTED_LOG_LIKELIHOOD, f"log evidence is {value}"
+    return value, ""

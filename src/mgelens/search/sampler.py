@@ -650,9 +650,13 @@ def _sample_nautilus(
     if filepath is not None:
         fingerprint_path = filepath.with_suffix(".fingerprint.json")
         fingerprint = _fingerprint(space, settings, seed)
-        if filepath.exists() and fingerprint_path.exists():
-            stored = json.loads(fingerprint_path.read_text())
-            _check_fingerprint(filepath, stored, fingerprint)
+        if filepath.exists():
+            if not fingerprint_path.exists():
+                raise CheckpointMismatchError(
+                    f"checkpoint {filepath} has no {fingerprint_path.name} to check it against "
+                    "these settings; delete it to start afresh"
+                )
+            _check_fingerprint(filepath, json.loads(fingerprint_path.read_text()), fingerprint)
         write_json(fingerprint_path, fingerprint)
     started = time.perf_counter()
     with _evaluating(evaluation, settings.n_processes) as pool:
