@@ -356,6 +356,14 @@ def test_fit_settings_reach_the_fit(mock_dir):
         assert dataset.settings.edge_rule == rule
 
 
+def test_sersic_lens_light_solves_unconstrained_unless_told_otherwise():
+    assert settings_from_mapping({}).positive_only
+    assert not settings_from_mapping({"lens_light_model": "sersic"}).positive_only
+    explicit = {"lens_light_model": "sersic", "positive_only": True}
+    assert settings_from_mapping(explicit).positive_only
+    assert not settings_from_mapping({"positive_only": False}).positive_only
+
+
 def test_settings_from_yaml_override_the_profile(tmp_path):
     path = tmp_path / "config.yaml"
     path.write_text(

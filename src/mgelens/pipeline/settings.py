@@ -74,8 +74,10 @@ class SlamSettings:
         The lens light: the MGE (paper's method) or the paper's 3×Sérsic comparison
         (SPEC §8.1): 2 Sérsics with a shared centre in SP, fixed entirely (intensities
         too) in SPix1 and SPix2, 3 Sérsics in LIGHT, fitted together with the EPL in MASS.
-        All Sérsic intensities are solved linearly. The paper's Sérsic runs also set
-        ``positive_only: false``.
+        All Sérsic intensities are solved linearly. The paper's Sérsic runs did not
+        constrain the source positive: a settings mapping (YAML ``slam:`` section or
+        ``--slam``) that sets ``lens_light_model: sersic`` without ``positive_only``
+        gets ``positive_only: false`` (:func:`settings_from_mapping`).
     mge_sets : {2, 4, 6}
         Extended 30-Gaussian sets of the LIGHT phase (SP always uses 2).
     point_set : bool
@@ -281,6 +283,8 @@ def settings_from_mapping(
         For an unknown key (named with its ``slam.`` path) or an invalid value.
     """
     content = dict(content)
+    if content.get("lens_light_model") == "sersic":
+        content.setdefault("positive_only", False)  # the paper's 3×Sérsic runs (SPEC §8.1)
     profile = profile or content.pop("profile", None) or DEFAULT_PROFILE
     content.pop("profile", None)
     base = profile_settings(profile)
