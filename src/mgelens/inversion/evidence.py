@@ -61,6 +61,15 @@ def log_det_regularization(H) -> float:
     or a pivot is not positive, the dense Cholesky is used instead. Dense input goes straight
     to the dense Cholesky.
 
+    Precision: every regularization matrix is A + εI with A 𝟙 = 0 and ε = 1e−8, so its
+    smallest eigenvalues (ε on 𝟙, and about ε on any group of pixels tied together by
+    large coefficients) come out of the LU as differences of numbers of the size of A. With
+    coefficients ρ up to about 1e4 (AdaptiveBrightnessSplit's λ ≲ 10, Constant's c ≲ 100)
+    ln det H is good to 1e−5; it is off by about 0.01 at ρ ≈ 1e6 (λ = 30), and by
+    0.1–17 beyond ρ ≈ 1e8 (λ ≳ 100, c ≳ 1e4), where it is rounding noise. The anchor
+    computes it the same way. The quick profile's SPix posteriors sit at λ_out = 6–19 and
+    c ≈ 2 on the mocks.
+
     Parameters
     ----------
     H : scipy.sparse matrix or array, or numpy.ndarray
