@@ -50,7 +50,8 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert counts["simulate_mock"] == 3
     assert counts["preview"] == 3
     # the default target is the whole DAG: five phases and isophotes per lens, summary
-    assert counts["phase"] == 15
+    assert counts["phase"] == 12  # SP, SPix2, LIGHT, MASS
+    assert counts["phase_spix1"] == 3  # SPix1, which also writes the adapt image
     assert counts["isophotes"] == 3
     assert counts["recovery"] == 3
     assert counts["recovery_table"] == 1
@@ -64,14 +65,22 @@ def test_dry_run_of_one_lens_slam_chain_runs_five_phases(tmp_path):
     assert result.returncode == 0, result.stderr
     output = result.stdout + result.stderr
     counts = job_counts(output)
-    assert counts["phase"] == 5
+    assert counts["phase"] == 4
+    assert counts["phase_spix1"] == 1
     assert counts["simulate_mock"] == 1
     for phase in ("sp", "spix1", "spix2", "light", "mass"):
         assert f"mgelens phase {phase} " in output
-    # the sheet's mask radius, MGE complexity and point set reach the command line, and
-    # the config's slam: section as JSON
-    assert "--mask-radius 1.6 --mge-sets 4 --point-set yes" in output
-    assert """--slam '{"profile": "quick"}'""" in output
+    # the sheet's mask radius reaches every phase, its MGE complexity and point set the
+    # LIGHT phase that reads them, and the config's slam: section goes as JSON
+    assert output.count("--mask-radius 1.6") == 5
+    assert output.count("--mge-sets 4 --point-set yes") == 1
+    assert (
+        "mgelens phase light --lens-dir results/M2/mock --results results/M2 --threads 1 "
+        "--mask-radius 1.6 --mge-sets 4 --point-set yes" in output
+    )
+    assert output.count("""--slam '{"profile": "quick"}'""") == 5
+    # SPix1's adapt image is a declared output and an input of SPix2, LIGHT and MASS
+    assert output.count("results/M2/spix1/adapt_image.fits") >= 4
     # mocks first (a lens cannot start without its mock), then
     # earlier phases first (SP highest), so every lens's SP starts early
     priorities = dict(re.findall(r"phase=(\w+)\n\s+priority: (\d+)", output))
@@ -113,6 +122,9 @@ SHEET_HEADER = "lens\tkind\tmock\tinput\tmask_radius\tmge_sets\tpoint_set\tz_len
         ("slam:\n  samplers: {mass: {n_live: 1}}\n", None, "slam.samplers.mass: n_live"),
         ("data_dir: /nowhere\n", "R1\treal\t\tslacsX\t3.0\t2\tno\t0.2\t0.6\n",
          "real lens 'R1': data.fits, noise_map.fits, psf.fits not found in /nowhere/slacsX"),
+        ("slam:\n  mge_sets: 6\n", None,
+         "slam.mge_sets is set per lens by the sample sheet's column of that name"),
+        ("", "M1\tmock\tM1\t\t1.8\t4\tyes\t0.28\n", "sheet.tsv: Error validating row 0"),
     ],
 )  # fmt: skip
 def test_bad_configuration_stops_with_a_message_naming_the_value(tmp_path, config, sheet, message):
@@ -123,6 +135,28 @@ def test_bad_configuration_stops_with_a_message_naming_the_value(tmp_path, confi
     result = snakemake("-n", "--configfile", str(tmp_path / "config.yaml"), workdir=tmp_path)
     assert result.returncode != 0
     assert message in result.stdout + result.stderr
+
+
+def test_comma_separated_sheet_is_named_with_the_fix(tmp_path):
+    (tmp_path / "sheet.csv").write_text(SHEET_HEADER.replace("\t", ","))
+    (tmp_path / "config.yaml").write_text(f"samples: {tmp_path / 'sheet.csv'}\n")
+    result = snakemake("-n", "--configfile", str(tmp_path / "config.yaml"), workdir=tmp_path)
+    assert result.returncode != 0
+    output = result.stdout + result.stderr
+    assert f"sample sheet {tmp_path / 'sheet.csv'} has no `lens` column" in output
+    assert "tab-separated" in output
+
+
+def test_one_phases_sampler_settings_reach_that_phase_only(tmp_path):
+    (tmp_path / "config.yaml").write_text("slam:\n  samplers:\n    mass: {n_live: 80}\n")
+    result = snakemake(
+        "results/M1/mass/result.json", "-n", "-p", "--configfile",
+        str(tmp_path / "config.yaml"), workdir=tmp_path,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    output = result.stdout + result.stderr
+    assert output.count("n_live") == 1
+    assert """--slam '{"profile": "quick", "samplers": {"mass": {"n_live": 80}}}'""" in output
 
 
 SCHEMAS = ROOT / "workflow" / "schemas"

@@ -14,7 +14,7 @@ import pandas as pd
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
-import mgelens
+from mgelens.provenance import code_version
 from mgelens.pipeline.settings import SettingsError, settings_from_mapping
 
 
@@ -23,10 +23,17 @@ try:  # stop before building the DAG if the slam: section is wrong, naming the k
     settings_from_mapping(config["slam"], origin="config")
 except SettingsError as error:
     raise WorkflowError(str(error)) from None
-SLAM_SETTINGS = json.dumps(config["slam"], sort_keys=True)
+SHEET_SETTINGS = ("mask_radius", "mge_sets", "point_set")
+"""slam: fields that the sample sheet sets per lens (columns of the same names)."""
+if any(key in config["slam"] for key in SHEET_SETTINGS):
+    raise WorkflowError(
+        f"config: slam.{next(k for k in SHEET_SETTINGS if k in config['slam'])} is set per lens "
+        f"by the sample sheet's column of that name ({', '.join(SHEET_SETTINGS)}); "
+        "remove it from the config's slam: section and edit the sheet instead"
+    )
 
 REPO = Path(workflow.basedir)
-MGELENS_VERSION = mgelens.__version__
+MGELENS_VERSION = code_version()  # version + source digest: any library edit reruns
 
 
 def repo_path(value: str) -> Path:
@@ -45,6 +52,11 @@ def read_sample_sheet(path: Path) -> pd.DataFrame:
     sheet = pd.read_csv(
         path, sep="\t", comment="#", dtype={"lens": str, "mock": str, "input": str}
     )
+    if "lens" not in sheet.columns:
+        raise WorkflowError(
+            f"sample sheet {path} has no `lens` column (columns read: {list(sheet.columns)}); "
+            "the sheet is tab-separated with a header line, see config/lenses.tsv"
+        )
     duplicated = sheet["lens"][sheet["lens"].duplicated()].tolist() if "lens" in sheet else []
     if duplicated:
         raise WorkflowError(f"{path}: lens ids must be unique, repeated: {duplicated}")
@@ -53,7 +65,10 @@ def read_sample_sheet(path: Path) -> pd.DataFrame:
 
 SAMPLE_SHEET = repo_path(config["samples"])
 LENSES = read_sample_sheet(SAMPLE_SHEET)
-validate(LENSES, schema="../schemas/lenses.schema.yaml")
+try:
+    validate(LENSES, schema="../schemas/lenses.schema.yaml")
+except WorkflowError as error:
+    raise WorkflowError(f"sample sheet {SAMPLE_SHEET}: {error}") from None
 DATA_DIR = repo_path(config["data_dir"])
 
 
@@ -110,9 +125,15 @@ def lens_imaging_folder(wildcards) -> str:
 
 
 def imaging_files(wildcards) -> dict:
-    """data, noise_map and psf files of a lens (mock: made by rule simulate_mock)."""
+    """data, noise_map and psf files of a lens (mock: made by rule simulate_mock), and a
+    real lens's optional mask.fits and info.json (pixel scale), which the fits read too."""
     folder = imaging_folder(wildcards.lens)
-    return {name: f"{folder}/{name}.fits" for name in ("data", "noise_map", "psf")}
+    files = {name: f"{folder}/{name}.fits" for name in ("data", "noise_map", "psf")}
+    if not is_mock(wildcards.lens):
+        for name, file in (("mask", "mask.fits"), ("info", "info.json")):
+            if (Path(folder) / file).is_file():
+                files[name] = f"{folder}/{file}"
+    return files
 
 
 def preview_inputs(wildcards) -> dict:
@@ -181,20 +202,35 @@ wildcard_constraints:
 
 
 def phase_inputs(wildcards) -> dict:
-    """Imaging files of the lens and the result files of the phases before this one."""
+    """Imaging files of the lens, the result files of the phases before this one and, after
+    SPix1, SPix1's adapt image."""
     files = imaging_files(wildcards)
-    for earlier in PHASES[: PHASES.index(wildcards.phase)]:
-        files[earlier] = f"results/{wildcards.lens}/{earlier}/result.json"
+    earlier = PHASES[: PHASES.index(wildcards.phase)]
+    for name in earlier:
+        files[name] = f"results/{wildcards.lens}/{name}/result.json"
+    if "spix1" in earlier:
+        files["adapt_image"] = f"results/{wildcards.lens}/spix1/adapt_image.fits"
     return files
 
 
 def phase_options(wildcards) -> str:
-    """Per-lens CLI options from the sample sheet."""
+    """Per-lens CLI options from the sample sheet: the mask radius, and for LIGHT (the only
+    phase that reads them) the MGE sets and point set."""
     row = LENSES.loc[wildcards.lens]
-    return (
-        f"--mask-radius {row['mask_radius']} --mge-sets {row['mge_sets']} "
-        f"--point-set {row['point_set']}"
-    )
+    options = f"--mask-radius {row['mask_radius']}"
+    if wildcards.phase == "light":
+        options += f" --mge-sets {row['mge_sets']} --point-set {row['point_set']}"
+    return options
+
+
+def phase_settings(wildcards) -> str:
+    """The config's slam: section as JSON, with the sampler settings of this phase only, so
+    that changing one phase's sampler reruns that phase (and the phases after it) only."""
+    section = dict(config["slam"])
+    samplers = section.pop("samplers", None) or {}
+    if wildcards.phase in samplers:
+        section["samplers"] = {wildcards.phase: samplers[wildcards.phase]}
+    return json.dumps(section, sort_keys=True)
 
 
 def phase_priority(wildcards) -> int:

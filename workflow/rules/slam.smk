@@ -3,8 +3,9 @@
 A phase reads only earlier phases' folders, so deleting one result reruns just that phase
 (and those after it). Build a lens's chain with
 `snakemake -j2 results/M1/mass/result.json`. One thread per phase, so that `-j2` fits two
-lenses at a time; the config's whole `slam:` section goes to every phase (`--slam`), and
-changing it reruns the phases.
+lenses at a time; the config's `slam:` section goes to every phase (`--slam`) with only
+that phase's sampler settings, and changing it reruns the phases. SPix1 also writes the
+adapt image that SPix2, LIGHT and MASS read (rule `phase_spix1`).
 """
 
 rule phase:
@@ -14,6 +15,8 @@ rule phase:
         result="results/{lens}/{phase}/result.json",
         samples="results/{lens}/{phase}/samples.csv",
         model="results/{lens}/{phase}/model.fits",
+    wildcard_constraints:
+        phase="sp|spix2|light|mass",
     log:
         "logs/{lens}/{phase}.log",
     benchmark:
@@ -22,7 +25,7 @@ rule phase:
         mgelens_version=MGELENS_VERSION,
         lens_dir=lens_imaging_folder,
         options=phase_options,
-        slam=SLAM_SETTINGS,
+        slam=phase_settings,
     threads: 1
     priority: phase_priority
     resources:
@@ -36,3 +39,13 @@ rule phase:
         "--results results/{wildcards.lens} --threads {threads} {params.options} "
         "--slam {params.slam:q} "
         "> {log:q} 2>&1"
+
+
+use rule phase as phase_spix1 with:
+    output:
+        result="results/{lens}/{phase}/result.json",
+        samples="results/{lens}/{phase}/samples.csv",
+        model="results/{lens}/{phase}/model.fits",
+        adapt_image="results/{lens}/{phase}/adapt_image.fits",
+    wildcard_constraints:
+        phase="spix1",

@@ -45,7 +45,6 @@ from pathlib import Path
 
 import numpy as np
 
-from mgelens import __version__
 from mgelens import mask as mask_module
 from mgelens.atomic import atomic_path, write_json
 from mgelens.fit import FitDataset, FitResult, FitSettings, MGESource, figure_of_merit, fit
@@ -56,6 +55,7 @@ from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
 from mgelens.pipeline import models, products
 from mgelens.pipeline.settings import PHASES, SlamSettings
+from mgelens.provenance import code_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
@@ -69,7 +69,7 @@ MODEL_FILE = "model.fits"
 ADAPT_IMAGE_FILE = "adapt_image.fits"
 LOG_FILE = "phase.log"
 CHECKPOINT_PREFIX = "checkpoint-"
-IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", "mask.fits")
+IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", "mask.fits", "info.json")
 MASS_TYPES = {"SIE": SIE, "EPL": EPL, "ExternalShear": ExternalShear}
 
 
@@ -301,7 +301,7 @@ def checkpoint_fingerprint(
         "mask": hashlib.sha256(mask.tobytes() + str(mask.shape).encode()).hexdigest(),
         "positions": None if problem.positions is None else problem.positions.describe(),
         "inputs": checksums,
-        "version": __version__,
+        "version": code_version(),
     }
 
 

@@ -33,6 +33,7 @@ import pandas as pd
 
 import mgelens
 from mgelens.atomic import atomic_path, write_json
+from mgelens.provenance import code_version
 from mgelens.search.model import ParameterSpace, derived_values, names_with_derived
 from mgelens.search.priors import PassingRule, TruncatedGaussian, passed_prior
 from mgelens.search.sampler import SIGMA_PROBABILITY, SamplerOutput, weighted_quantile
@@ -64,8 +65,13 @@ def _distribution_version(name: str) -> str | None:
 
 
 def collect_versions() -> dict[str, str]:
-    """Versions of Python, mgelens and the numerical packages a result depends on."""
-    versions = {"python": platform.python_version(), "mgelens": mgelens.__version__}
+    """Versions of Python, mgelens (number and :func:`~mgelens.provenance.code_version`) and
+    the numerical packages a result depends on."""
+    versions = {
+        "python": platform.python_version(),
+        "mgelens": mgelens.__version__,
+        "mgelens_code": code_version(),
+    }
     for name in ("numpy", "scipy", "dynesty", "nautilus-sampler"):
         version = _distribution_version(name)
         if version is not None:
