@@ -104,6 +104,30 @@ def test_dry_run_of_the_slacs_sample_reads_the_data_in_place(tmp_path, slacs_dir
     assert str(slacs_dir / "slacs0252+0039" / "data.fits") in result.stdout + result.stderr
 
 
+def test_a_real_lenss_mask_and_info_files_are_phase_inputs(tmp_path):
+    """Fits read a real lens's optional mask.fits and info.json: editing them reruns."""
+    from mgelens.imaging import Imaging
+
+    folder = tmp_path / "data" / "R1"
+    shape = (21, 21)
+    psf = np.zeros((3, 3))
+    psf[1, 1] = 1.0
+    mask = np.zeros(shape, dtype=bool)
+    mask[0, 0] = True
+    Imaging(np.zeros(shape), np.ones(shape), psf, 0.05, mask=mask).to_fits(folder)
+    (folder / "info.json").write_text('{"pixel_scale_arcsec": 0.05}')
+    (tmp_path / "sheet.tsv").write_text(SHEET_HEADER + "R1\treal\t\tR1\t0.5\t2\tno\t0.2\t0.6\n")
+    config = tmp_path / "config.yaml"
+    config.write_text(f"samples: {tmp_path / 'sheet.tsv'}\ndata_dir: {tmp_path / 'data'}\n")
+    result = snakemake(
+        "results/R1/sp/result.json", "-n", "--configfile", str(config), workdir=tmp_path
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    inputs = re.search(r"rule phase:\n(?:.*\n)*?\s+input: (.*)", result.stdout + result.stderr)[1]
+    assert str(folder / "mask.fits") in inputs
+    assert str(folder / "info.json") in inputs
+
+
 def test_lint_is_clean(tmp_path):
     result = snakemake("--lint", workdir=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
