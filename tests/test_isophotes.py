@@ -21,6 +21,7 @@ import json
 import logging
 import math
 
+import numba
 import numpy as np
 import pandas as pd
 import pytest
@@ -507,6 +508,22 @@ def test_isophotes_command(tmp_path, capsys):
         )
         == 1
     )
+
+
+def test_isophotes_command_names_a_non_finite_image_and_runs_on_its_threads(tmp_path, caplog):
+    image = deformed_image(0.6, 120.0, 0.0, centre=(0.0, 0.0))
+    image[0, 0] = np.nan
+    fits.writeto(tmp_path / "lens.fits", image)
+    threads = numba.get_num_threads()
+    try:
+        arguments = ["isophotes", str(tmp_path / "lens.fits"), "--pixel-scale", "0.05"]
+        code = main([*arguments, "--threads", "1", "--out", str(tmp_path / "x.csv")])
+        assert numba.get_num_threads() == 1
+    finally:
+        numba.set_num_threads(threads)
+    assert code == 1
+    assert f"{tmp_path / 'lens.fits'}: 1 NaN or infinite pixel(s)" in caplog.text
+    assert not (tmp_path / "x.csv").exists()
 
 
 # --------------------------------------------------------------------------------------

@@ -75,7 +75,7 @@ class ParameterRecovery:
     upper_3sigma: float
     within_3sigma: bool
     error: float
-    """median − truth (angles: reduced to (−90°, 90°])."""
+    """median − truth (angles: reduced to [−90°, 90°))."""
 
 
 def mass_recovery(truth: Mapping, phase: PhaseResult) -> list[ParameterRecovery]:

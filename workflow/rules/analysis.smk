@@ -29,7 +29,7 @@ rule isophotes:
     shell:
         "mgelens isophotes --phase results/{wildcards.lens}/mass --psf {input.psf:q} "
         "--save-image {output.image:q} --lens {wildcards.lens} --summary {output.summary:q} "
-        "--figure {output.figure:q} --out {output.table:q} > {log:q} 2>&1"
+        "--figure {output.figure:q} --out {output.table:q} --threads {threads} > {log:q} 2>&1"
 
 
 rule summary:
@@ -84,7 +84,7 @@ rule recovery:
         "../envs/mgelens.yaml"
     shell:
         "mgelens recovery --lens-dir results/{wildcards.lens}/mock "
-        "--phase results/{wildcards.lens}/mass --out {output:q} > {log:q} 2>&1"
+        "--phase results/{wildcards.lens}/mass --out {output:q} --threads {threads} > {log:q} 2>&1"
 
 
 rule recovery_table:

@@ -25,4 +25,4 @@ rule preview:
     conda:
         "../envs/mgelens.yaml"
     shell:
-        "mgelens preview {params.folder:q} --out {output:q} > {log:q} 2>&1"
+        "mgelens preview {params.folder:q} --out {output:q} --threads {threads} > {log:q} 2>&1"

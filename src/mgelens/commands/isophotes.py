@@ -29,6 +29,7 @@ import numpy as np
 from astropy.io import fits
 
 from mgelens.atomic import atomic_path, write_fits, write_json
+from mgelens.commands import add_threads_argument, use_threads
 from mgelens.convolve import convolve_image
 from mgelens.imaging import PIXSCALE_KEY, ImagingError, read_fits_image, read_psf
 from mgelens.isophotes import (
@@ -81,6 +82,7 @@ def register(subparsers) -> None:
     parser.add_argument("--summary", type=Path, help="write the per-lens summary JSON here")
     parser.add_argument("--figure", type=Path, help="write the isophote figure (PNG) here")
     parser.add_argument("--out", type=Path, required=True, help="isophote table (CSV)")
+    add_threads_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -101,6 +103,7 @@ def format_statistics(lens: str, statistics: IsophoteStatistics) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    use_threads(args)
     try:
         if args.phase is not None:
             image, centre, mass = _phase_light(args)
@@ -140,6 +143,12 @@ def _image_light(args: argparse.Namespace) -> np.ndarray:
     """The lens-light image of ``args.image`` (convolved with ``--psf`` if given)."""
     image, header = read_fits_image(args.image)
     image = np.asarray(image, dtype=float)
+    bad = int(np.count_nonzero(~np.isfinite(image)))
+    if bad:
+        raise ValueError(
+            f"{args.image}: {bad} NaN or infinite pixel(s); isophotes need a finite image "
+            "(fill or crop them, e.g. with the model's lens light: mgelens isophotes --phase)"
+        )
     if args.pixel_scale is None:
         if PIXSCALE_KEY not in header:
             raise ValueError(

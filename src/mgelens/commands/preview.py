@@ -24,6 +24,7 @@ from matplotlib import colors
 from matplotlib.figure import Figure
 
 from mgelens.atomic import atomic_path
+from mgelens.commands import add_threads_argument, use_threads
 from mgelens.imaging import Imaging
 from mgelens.mass import caustic, tangential_critical_curve
 from mgelens.simulate import MOCK_FILES, mass_from_truth
@@ -45,10 +46,12 @@ def register(subparsers) -> None:
     )
     parser.add_argument("folder", metavar="DIR", help="imaging folder (mock or real)")
     parser.add_argument("--out", required=True, metavar="PNG", help="output PNG file")
+    add_threads_argument(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    use_threads(args)
     try:
         figure = preview_figure(args.folder)
         with atomic_path(args.out) as temporary:

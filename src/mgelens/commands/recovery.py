@@ -29,6 +29,7 @@ import numpy as np
 from astropy.io import fits
 
 from mgelens.atomic import atomic_path, write_json
+from mgelens.commands import add_threads_argument, use_threads
 from mgelens.imaging import ImagingError, read_fits_image
 from mgelens.mask import circular
 from mgelens.pipeline.phases import MODEL_FILE
@@ -62,10 +63,12 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--out", type=Path, required=True, help="recovery record (JSON) or, with --table, CSV"
     )
+    add_threads_argument(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    use_threads(args)
     if args.table:
         return _gather(args.table, args.out)
     if args.lens_dir is None or args.phase is None:

@@ -17,7 +17,7 @@ import logging
 import time
 
 from mgelens import simulate
-from mgelens.threads import limit_threads
+from mgelens.commands import add_threads_argument, use_threads
 
 logger = logging.getLogger("mgelens.simulate")
 
@@ -74,9 +74,7 @@ def register(subparsers) -> None:
         metavar="S",
         help="S x S sub-pixels per pixel for lens light and source (default %(default)s)",
     )
-    parser.add_argument(
-        "--threads", type=int, default=1, metavar="T", help="numba threads (default 1)"
-    )
+    add_threads_argument(parser)
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
     parser.set_defaults(func=run)
 
@@ -106,7 +104,7 @@ def build_lens(args: argparse.Namespace) -> simulate.MockLens:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        limit_threads(args.threads)
+        use_threads(args)
         observation = simulate.Observation(image_size=args.image_size, sub_size=args.sub_size)
         lens = build_lens(args)
         start = time.perf_counter()
