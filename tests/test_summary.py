@@ -41,7 +41,7 @@ def statistics(delta_q, delta_pa, a4, n):
 def summaries(tmp_path):
     paths = []
     for lens, values in LENSES.items():
-        mass = MassShape(0.8, 45.0, einstein_radius=1.2) if lens == "J0001" else None
+        mass = MassShape(0.8, 45.0, critical_curve_einstein_radius=1.2) if lens == "J0001" else None
         path = tmp_path / lens / "isophotes.json"
         write_json(path, lens_summary(lens, statistics(*values), mass, {"image": "x.fits"}))
         paths.append(path)
@@ -68,7 +68,7 @@ def test_sample_table_has_one_row_per_lens(summaries):
     assert math.isnan(row["mass_axis_ratio"])
     with_mass = table.set_index("lens").loc["J0001"]
     assert with_mass["mass_axis_ratio"] == pytest.approx(0.8)
-    assert with_mass["mass_einstein_radius"] == pytest.approx(1.2)
+    assert with_mass["mass_critical_curve_einstein_radius"] == pytest.approx(1.2)
     expected = {"J0001": True, "J0002": False, "J0003": True, "J0004": False, "J0005": False,
                 "J0006": False}  # fmt: skip
     assert dict(zip(table["lens"], table["complex"], strict=True)) == expected

@@ -904,8 +904,9 @@ class MassShape:
         Tangential critical curve (x, y) in arcsec.
     critical_curve_ellipse : Ellipse or None
         :func:`fit_ellipse` of the critical curve.
-    einstein_radius : float or None
-        Effective Einstein radius sqrt(area/π) of the critical curve, arcsec.
+    critical_curve_einstein_radius : float or None
+        Effective Einstein radius sqrt(area/π) of the critical curve, arcsec (not the
+        profile's θ_E parameter: 1.180″ against θ_E = 1.2″ for M1's true mass).
     """
 
     axis_ratio: float
@@ -914,7 +915,7 @@ class MassShape:
     angle_interval: tuple[float, float] | None = None
     critical_curve: tuple[np.ndarray, np.ndarray] | None = None
     critical_curve_ellipse: Ellipse | None = None
-    einstein_radius: float | None = None
+    critical_curve_einstein_radius: float | None = None
 
     def to_dict(self) -> dict:
         """JSON-ready summary (without the critical-curve vertices)."""
@@ -926,7 +927,7 @@ class MassShape:
             "angle_interval": self.angle_interval,
             "critical_curve_axis_ratio": None if ellipse is None else ellipse.axis_ratio,
             "critical_curve_angle": None if ellipse is None else ellipse.angle,
-            "einstein_radius": self.einstein_radius,
+            "critical_curve_einstein_radius": self.critical_curve_einstein_radius,
         }
 
 
@@ -956,5 +957,5 @@ def mass_shape_from(
         angle_interval=angle_interval,
         critical_curve=(x, y),
         critical_curve_ellipse=fit_ellipse(x, y),
-        einstein_radius=math.sqrt(abs(_polygon_area(x[:-1], y[:-1])) / math.pi),
+        critical_curve_einstein_radius=math.sqrt(abs(_polygon_area(x[:-1], y[:-1])) / math.pi),
     )

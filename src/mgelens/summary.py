@@ -10,7 +10,8 @@ A per-lens summary is the JSON written by ``mgelens isophotes --summary`` (built
                      "n_isophotes": ..., "n_isophotes_pa": ..., "sma_min": 0.5,
                      "sma_max": 2.5, "round_axis_ratio": 0.95},
       "mass": null or {"axis_ratio": ..., "angle": ..., "critical_curve_axis_ratio": ...,
-                       "critical_curve_angle": ..., "einstein_radius": ..., ...},
+                       "critical_curve_angle": ..., "critical_curve_einstein_radius": ...,
+                       ...},
       "inputs": {...}
     }
 
@@ -42,7 +43,7 @@ MASS_COLUMNS = (
     "angle",
     "critical_curve_axis_ratio",
     "critical_curve_angle",
-    "einstein_radius",
+    "critical_curve_einstein_radius",
 )
 _DERIVED_COLUMNS = ("abs_a4_a_max", "complex")
 TABLE_COLUMNS = (

@@ -86,9 +86,9 @@ def _mark_radii(ax: Axes, mass: MassShape | None) -> None:
     """Shade a outside the statistics range; mark the Einstein radius."""
     ax.axvspan(0.0, STATISTICS_SMA_RANGE[0], color="0.92", zorder=0)
     ax.axvspan(STATISTICS_SMA_RANGE[1], 1e3, color="0.92", zorder=0)
-    if mass is not None and mass.einstein_radius is not None:
+    if mass is not None and mass.critical_curve_einstein_radius is not None:
         ax.axvline(
-            mass.einstein_radius,
+            mass.critical_curve_einstein_radius,
             color=CRITICAL_COLOUR,
             linestyle="-.",
             linewidth=1.0,
