@@ -14,6 +14,7 @@ import pandas as pd
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
+from mgelens.imaging import INFO_FILE, MASK_FILE
 from mgelens.provenance import code_version
 from mgelens.pipeline.settings import SettingsError, settings_from_mapping
 
@@ -25,9 +26,10 @@ except SettingsError as error:
     raise WorkflowError(str(error)) from None
 SHEET_SETTINGS = ("mask_radius", "mge_sets", "point_set")
 """slam: fields that the sample sheet sets per lens (columns of the same names)."""
-if any(key in config["slam"] for key in SHEET_SETTINGS):
+_sheet_keys = [key for key in SHEET_SETTINGS if key in config["slam"]]
+if _sheet_keys:
     raise WorkflowError(
-        f"config: slam.{next(k for k in SHEET_SETTINGS if k in config['slam'])} is set per lens "
+        f"config: slam.{_sheet_keys[0]} is set per lens "
         f"by the sample sheet's column of that name ({', '.join(SHEET_SETTINGS)}); "
         "remove it from the config's slam: section and edit the sheet instead"
     )
@@ -57,7 +59,7 @@ def read_sample_sheet(path: Path) -> pd.DataFrame:
             f"sample sheet {path} has no `lens` column (columns read: {list(sheet.columns)}); "
             "the sheet is tab-separated with a header line, see config/lenses.tsv"
         )
-    duplicated = sheet["lens"][sheet["lens"].duplicated()].tolist() if "lens" in sheet else []
+    duplicated = sheet["lens"][sheet["lens"].duplicated()].tolist()
     if duplicated:
         raise WorkflowError(f"{path}: lens ids must be unique, repeated: {duplicated}")
     return sheet.set_index("lens", drop=False)
@@ -130,7 +132,7 @@ def imaging_files(wildcards) -> dict:
     folder = imaging_folder(wildcards.lens)
     files = {name: f"{folder}/{name}.fits" for name in ("data", "noise_map", "psf")}
     if not is_mock(wildcards.lens):
-        for name, file in (("mask", "mask.fits"), ("info", "info.json")):
+        for name, file in (("mask", MASK_FILE), ("info", INFO_FILE)):
             if (Path(folder) / file).is_file():
                 files[name] = f"{folder}/{file}"
     return files

@@ -2,16 +2,9 @@
 
 import argparse
 
-from mgelens.threads import limit_threads
-
 
 def add_threads_argument(parser: argparse.ArgumentParser) -> None:
-    """``--threads T`` (default 1); the command calls :func:`use_threads` with it."""
+    """``--threads T`` (default 1), for :func:`mgelens.threads.limit_threads`."""
     parser.add_argument(
         "--threads", type=int, default=1, metavar="T", help="numba threads (default 1)"
     )
-
-
-def use_threads(args: argparse.Namespace) -> None:
-    """Numba (and FFT) threads from ``--threads``, BLAS on one (:func:`limit_threads`)."""
-    limit_threads(args.threads)

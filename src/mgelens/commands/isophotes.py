@@ -29,7 +29,7 @@ import numpy as np
 from astropy.io import fits
 
 from mgelens.atomic import atomic_path, write_fits, write_json
-from mgelens.commands import add_threads_argument, use_threads
+from mgelens.commands import add_threads_argument
 from mgelens.convolve import convolve_image
 from mgelens.imaging import PIXSCALE_KEY, ImagingError, read_fits_image, read_psf
 from mgelens.isophotes import (
@@ -45,6 +45,7 @@ from mgelens.plot import save_png
 from mgelens.plot.isophotes import isophote_figure
 from mgelens.search.results import PhaseResult
 from mgelens.summary import lens_summary
+from mgelens.threads import limit_threads
 
 DEFAULT_PIXEL_SCALE = 0.05
 """Arcsec per pixel of the rendered phase lens light (SPEC §9: Δ = 0.05″)."""
@@ -103,7 +104,7 @@ def format_statistics(lens: str, statistics: IsophoteStatistics) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    use_threads(args)
+    limit_threads(args.threads)
     try:
         if args.phase is not None:
             image, centre, mass = _phase_light(args)

@@ -24,10 +24,11 @@ from matplotlib import colors
 from matplotlib.figure import Figure
 
 from mgelens.atomic import atomic_path
-from mgelens.commands import add_threads_argument, use_threads
+from mgelens.commands import add_threads_argument
 from mgelens.imaging import Imaging
 from mgelens.mass import caustic, tangential_critical_curve
 from mgelens.simulate import MOCK_FILES, mass_from_truth
+from mgelens.threads import limit_threads
 
 logger = logging.getLogger("mgelens.preview")
 
@@ -51,7 +52,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    use_threads(args)
+    limit_threads(args.threads)
     try:
         figure = preview_figure(args.folder)
         with atomic_path(args.out) as temporary:

@@ -29,7 +29,7 @@ import numpy as np
 from astropy.io import fits
 
 from mgelens.atomic import atomic_path, write_json
-from mgelens.commands import add_threads_argument, use_threads
+from mgelens.commands import add_threads_argument
 from mgelens.imaging import ImagingError, read_fits_image
 from mgelens.mask import circular
 from mgelens.pipeline.phases import MODEL_FILE
@@ -43,6 +43,7 @@ from mgelens.recovery import (
     true_mass_parameters,
 )
 from mgelens.search.results import PhaseResult
+from mgelens.threads import limit_threads
 
 logger = logging.getLogger(__name__)
 
@@ -68,7 +69,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    use_threads(args)
+    limit_threads(args.threads)
     if args.table:
         return _gather(args.table, args.out)
     if args.lens_dir is None or args.phase is None:

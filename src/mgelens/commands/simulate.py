@@ -17,7 +17,8 @@ import logging
 import time
 
 from mgelens import simulate
-from mgelens.commands import add_threads_argument, use_threads
+from mgelens.commands import add_threads_argument
+from mgelens.threads import limit_threads
 
 logger = logging.getLogger("mgelens.simulate")
 
@@ -104,7 +105,7 @@ def build_lens(args: argparse.Namespace) -> simulate.MockLens:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        use_threads(args)
+        limit_threads(args.threads)
         observation = simulate.Observation(image_size=args.image_size, sub_size=args.sub_size)
         lens = build_lens(args)
         start = time.perf_counter()

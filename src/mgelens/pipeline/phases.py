@@ -50,7 +50,7 @@ from mgelens.atomic import atomic_path, write_json
 from mgelens.fit import FitDataset, FitResult, FitSettings, MGESource, figure_of_merit, fit
 from mgelens.geometry import axis_ratio_and_angle_from
 from mgelens.grid import pixel_centres
-from mgelens.imaging import Imaging
+from mgelens.imaging import INFO_FILE, MASK_FILE, Imaging
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
 from mgelens.pipeline import models, products
@@ -69,7 +69,7 @@ MODEL_FILE = "model.fits"
 ADAPT_IMAGE_FILE = "adapt_image.fits"
 LOG_FILE = "phase.log"
 CHECKPOINT_PREFIX = "checkpoint-"
-IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", "mask.fits", "info.json")
+IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", MASK_FILE, INFO_FILE)
 MASS_TYPES = {"SIE": SIE, "EPL": EPL, "ExternalShear": ExternalShear}
 
 
