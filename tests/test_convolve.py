@@ -65,6 +65,18 @@ def test_blur_columns_equals_masked_native_convolution(asymmetric_psf, include_b
     assert np.allclose(single, out[:, 0], atol=1e-14)
 
 
+def test_transpose_blur_is_the_transpose_of_the_mask_operator(asymmetric_psf):
+    """Bᵀ through the flipped kernel equals the sparse operator's transpose, for an
+    asymmetric PSF (a symmetric one would not tell a missing flip)."""
+    x, y = pixel_centres((31, 29), 0.1)
+    mask = np.hypot(x - 0.2, y) > 1.1
+    conv = Convolver(mask, asymmetric_psf)
+    columns = np.random.default_rng(3).random((np.count_nonzero(~mask), 3))
+    expected = conv.operator(include_blurring=False).T @ columns
+    assert np.allclose(conv.transpose_blur_columns(columns), expected, atol=1e-13)
+    assert not np.allclose(conv.blur_columns(columns, include_blurring=False), expected)
+
+
 @pytest.mark.parametrize("threads", [1, 2])
 def test_fft_blurring_runs_on_the_jobs_threads(asymmetric_psf, monkeypatch, threads):
     """scipy.fft gets numba's thread count as its workers: a one-thread phase job must not

@@ -76,6 +76,9 @@ def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
     assert np.allclose(curvature, curvature.T)
     d = data_vector(dense, f, operator, inverse_variance, data)
     assert np.allclose(d, full.T @ (inverse_variance * data))
+    products = operator.T @ (inverse_variance[:, None] * dense)  # Bᵀ W L
+    via_products = curvature_matrix(dense, f, plan, inverse_variance, dense_products=products)
+    assert np.allclose(via_products, expected, rtol=1e-12, atol=1e-12)
     no_light = curvature_matrix(np.zeros((n_pixels, 0)), f, plan, inverse_variance)
     assert np.allclose(no_light, expected[4:, 4:], rtol=1e-12, atol=1e-12)
     only_light = curvature_matrix(dense, None, None, inverse_variance)

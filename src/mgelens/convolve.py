@@ -266,6 +266,19 @@ class Convolver:
             raise ValueError(f"unknown convolution method {method!r}")
         return out[:, 0] if vector else out
 
+    def transpose_blur_columns(self, columns: np.ndarray) -> np.ndarray:
+        """Bᵀ columns for the mask-to-mask operator B (``include_blurring=False``).
+
+        B_ij = psf[r_i − r_j + h_y, c_i − c_j + h_x], so Bᵀ is the mask-to-mask operator
+        of the PSF flipped in both axes and is computed by the same fast convolutions.
+        ``columns`` (N_I,) or (N_I, n_col) are on the unmasked pixels; so is the result.
+        """
+        return self._flipped.blur_columns(columns, include_blurring=False)
+
+    @cached_property
+    def _flipped(self) -> "Convolver":
+        return Convolver(self.mask, self.psf[::-1, ::-1].copy())
+
     def _blur_fft(self, columns: np.ndarray, in_mask: np.ndarray) -> np.ndarray:
         (r0, r1, c0, c1), shape, kernel_fft = self._fft_geometry
         ky, kx = self.psf.shape

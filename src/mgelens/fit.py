@@ -194,11 +194,30 @@ class FitDataset:
         Phases that keep the light geometry fixed and only re-solve intensities pay for the
         columns once.
         """
+        return self._lens_light_entry(components)["columns"]
+
+    def lens_light_source_products(self, components: tuple) -> np.ndarray:
+        """Bᵀ W L (N_I, Σ n_columns) of the lens-light columns L, cached with them.
+
+        For any mapping matrix f the lens–source block of the curvature matrix is
+        F_LS = Lᵀ W B f = ((Bᵀ W L)ᵀ f), one sparse product per evaluation: phases that
+        keep the light geometry fixed (SPix1, SPix2, MASS) then leave only F_SS to the
+        curvature tiles.
+        """
+        entry = self._lens_light_entry(components)
+        if "source_products" not in entry:
+            weighted = self.inverse_variance[:, None] * entry["columns"]
+            entry["source_products"] = self.convolver.transpose_blur_columns(weighted)
+        return entry["source_products"]
+
+    def _lens_light_entry(self, components: tuple) -> dict:
         key = tuple(c.cache_key for c in components)
         if key not in self._columns_cache:
             if len(self._columns_cache) >= 4:
                 self._columns_cache.pop(next(iter(self._columns_cache)))
-            self._columns_cache[key] = self.light_grid.blurred_columns(list(components))
+            self._columns_cache[key] = {
+                "columns": self.light_grid.blurred_columns(list(components))
+            }
         return self._columns_cache[key]
 
     def repeated_source(self, mass, source: "PixelizedSource") -> "SourceSystem | None":
@@ -399,7 +418,7 @@ class SourceOperator:
 @dataclass(frozen=True, eq=False)
 class SourceSystem:
     """The parts of the linear system that depend on mass and source only: the operator,
-    F_SS + H (dense), ln det H and the blurred mapping G (for F_LS = Gᵀ W L)."""
+    F_SS + H (dense) and ln det H."""
 
     operator: SourceOperator
     curvature_regularization: np.ndarray
@@ -414,13 +433,14 @@ class SourceSystem:
         f_ss += h.toarray()
         return cls(operator, f_ss, log_det_regularization(h))
 
-    def curvature(self, dense: np.ndarray, inverse_variance: np.ndarray) -> np.ndarray:
-        """The full [dense | source] matrix F + H for new ``dense`` columns."""
+    def curvature(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
+        """The full [dense | source] matrix F + H for new ``dense`` columns L of
+        ``dataset``, with F_LS = (fᵀ Bᵀ W L)ᵀ (a transposed blur, then a sparse product)."""
         n_dense = dense.shape[1]
-        weighted = inverse_variance[:, None] * dense
+        weighted = dataset.inverse_variance[:, None] * dense
         q = np.empty((n_dense + self.curvature_regularization.shape[0],) * 2)
         q[:n_dense, :n_dense] = dense.T @ weighted
-        f_ls = (self.operator.blurred_mapping.T @ weighted).T
+        f_ls = (self.operator.mapping.T @ dataset.convolver.transpose_blur_columns(weighted)).T
         q[:n_dense, n_dense:] = f_ls
         q[n_dense:, :n_dense] = f_ls.T
         q[n_dense:, n_dense:] = self.curvature_regularization
@@ -491,11 +511,18 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
         dense, mapping, dataset.source_psf_operator, dataset.inverse_variance, residual_data
     )
     if system is None:
-        q = curvature_matrix(dense, mapping, dataset.tile_plan, dataset.inverse_variance)
+        products = (
+            dataset.lens_light_source_products(tuple(model.lens_light))
+            if operator is not None and model.lens_light
+            else None
+        )
+        q = curvature_matrix(
+            dense, mapping, dataset.tile_plan, dataset.inverse_variance, dense_products=products
+        )
         if operator is not None:
             q[n_dense:, n_dense:] += h.toarray()
     else:
-        q = system.curvature(dense, dataset.inverse_variance)
+        q = system.curvature(dense, dataset)
     q[np.arange(n_dense), np.arange(n_dense)] += settings.mge_diagonal
     fixed_zero = None
     if operator is not None:

