@@ -6,7 +6,7 @@ from scipy import signal, sparse
 
 from mgelens.convolve import Convolver
 from mgelens.grid import pixel_centres
-from mgelens.inversion.system import TilePlan, curvature_matrix, data_vector
+from mgelens.inversion.system import DenseTerms, TilePlan, curvature_matrix, data_vector
 from mgelens.source.mapping import SourceWeights, mapping_matrix
 
 
@@ -76,9 +76,10 @@ def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
     assert np.allclose(curvature, curvature.T)
     d = data_vector(dense, f, operator, inverse_variance, data)
     assert np.allclose(d, full.T @ (inverse_variance * data))
-    products = operator.T @ (inverse_variance[:, None] * dense)  # Bᵀ W L
-    via_products = curvature_matrix(dense, f, plan, inverse_variance, dense_products=products)
-    assert np.allclose(via_products, expected, rtol=1e-12, atol=1e-12)
+    terms = DenseTerms.build(dense, inverse_variance, convolver)
+    assert np.allclose(terms.products, operator.T @ (inverse_variance[:, None] * dense))
+    cached = curvature_matrix(dense, f, plan, inverse_variance, dense_terms=terms)
+    assert np.allclose(cached, expected, rtol=1e-12, atol=1e-12)
     no_light = curvature_matrix(np.zeros((n_pixels, 0)), f, plan, inverse_variance)
     assert np.allclose(no_light, expected[4:, 4:], rtol=1e-12, atol=1e-12)
     only_light = curvature_matrix(dense, None, None, inverse_variance)

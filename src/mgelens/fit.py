@@ -28,7 +28,7 @@ from mgelens.inversion.evidence import (
     noise_normalization,
 )
 from mgelens.inversion.solve import InversionError, LinearSolution, solve_linear_system
-from mgelens.inversion.system import TilePlan, curvature_matrix, data_vector
+from mgelens.inversion.system import DenseTerms, TilePlan, curvature_matrix, data_vector
 from mgelens.light import LightGrid, MGESet
 from mgelens.mask import validate_mask
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -196,19 +196,16 @@ class FitDataset:
         """
         return self._lens_light_entry(components)["columns"]
 
-    def lens_light_source_products(self, components: tuple) -> np.ndarray:
-        """Bᵀ W L (N_I, Σ n_columns) of the lens-light columns L, cached with them.
-
-        For any mapping matrix f the lens–source block of the curvature matrix is
-        F_LS = Lᵀ W B f = ((Bᵀ W L)ᵀ f), one sparse product per evaluation: phases that
-        keep the light geometry fixed (SPix1, SPix2, MASS) then leave only F_SS to the
-        curvature tiles.
-        """
+    def lens_light_dense_terms(self, components: tuple) -> DenseTerms:
+        """Lᵀ W L and Bᵀ W L of the lens-light columns L (:class:`DenseTerms`), cached with
+        the columns: phases that keep the light geometry fixed (SPix1, SPix2, MASS) then
+        leave only F_SS to the curvature tiles."""
         entry = self._lens_light_entry(components)
-        if "source_products" not in entry:
-            weighted = self.inverse_variance[:, None] * entry["columns"]
-            entry["source_products"] = self.convolver.transpose_blur_columns(weighted)
-        return entry["source_products"]
+        if "dense_terms" not in entry:
+            entry["dense_terms"] = DenseTerms.build(
+                entry["columns"], self.inverse_variance, self.convolver
+            )
+        return entry["dense_terms"]
 
     def _lens_light_entry(self, components: tuple) -> dict:
         key = tuple(c.cache_key for c in components)
@@ -437,10 +434,10 @@ class SourceSystem:
         """The full [dense | source] matrix F + H for new ``dense`` columns L of
         ``dataset``, with F_LS = (fᵀ Bᵀ W L)ᵀ (a transposed blur, then a sparse product)."""
         n_dense = dense.shape[1]
-        weighted = dataset.inverse_variance[:, None] * dense
+        terms = DenseTerms.build(dense, dataset.inverse_variance, dataset.convolver)
         q = np.empty((n_dense + self.curvature_regularization.shape[0],) * 2)
-        q[:n_dense, :n_dense] = dense.T @ weighted
-        f_ls = (self.operator.mapping.T @ dataset.convolver.transpose_blur_columns(weighted)).T
+        q[:n_dense, :n_dense] = terms.gram
+        f_ls = (self.operator.mapping.T @ terms.products).T
         q[:n_dense, n_dense:] = f_ls
         q[n_dense:, :n_dense] = f_ls.T
         q[n_dense:, n_dense:] = self.curvature_regularization
@@ -511,13 +508,13 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
         dense, mapping, dataset.source_psf_operator, dataset.inverse_variance, residual_data
     )
     if system is None:
-        products = (
-            dataset.lens_light_source_products(tuple(model.lens_light))
+        terms = (
+            dataset.lens_light_dense_terms(tuple(model.lens_light))
             if operator is not None and model.lens_light
             else None
         )
         q = curvature_matrix(
-            dense, mapping, dataset.tile_plan, dataset.inverse_variance, dense_products=products
+            dense, mapping, dataset.tile_plan, dataset.inverse_variance, dense_terms=terms
         )
         if operator is not None:
             q[n_dense:, n_dense:] += h.toarray()
