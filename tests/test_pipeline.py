@@ -338,6 +338,7 @@ def test_profiles_paper_and_quick():
     assert quick.positions_penalty
     assert not paper.positions_penalty
     assert (paper.psf_trim, quick.psf_trim) == (1e-10, 1e-4)
+    assert (paper.sub_size, quick.sub_size) == (4, 2)
 
 
 def test_fit_settings_reach_the_fit(mock_dir):
@@ -540,7 +541,7 @@ def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):
         {"overlay_shape": (20, 20)},
         {"positions_penalty": False},
         {"mask_radius": 1.2},
-        {"sub_size": 2},
+        {"sub_size": 3},
     ],
 )
 def test_checkpoint_fingerprint_follows_every_input_of_the_likelihood(sp_run, mock_dir, changes):

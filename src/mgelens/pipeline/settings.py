@@ -6,8 +6,9 @@ Two profiles give the defaults (:data:`PROFILES`):
   150, nautilus where the paper used it, 1500 k-means source pixels, a 34×34 overlay.
 * ``quick`` (default): dynesty random walks with few live points and a looser stopping
   criterion from SP to LIGHT, nautilus with 50 live points in MASS (whose posterior is the
-  result), 500 k-means source pixels, a 24×24 overlay, light profiles
-  over-sampled 2×2 (8×8 within 0.3″ of the centre) and the PSF cut at 1e−4 of its peak,
+  result), 500 k-means source pixels, a 24×24 overlay, a 2×2 source sub-grid (paper
+  4×4), light profiles over-sampled 2×2 (8×8 within 0.3″ of the centre) and the PSF cut
+  at 1e−4 of its peak,
   for the embedded default sample (M1–M3) on two cores. The MGE itself is not simplified
   (30 Gaussians per set, SPEC §2.4).
 
@@ -121,7 +122,11 @@ class SlamSettings:
         Fit settings (:class:`mgelens.fit.FitSettings`). ``psf_trim`` cuts the PSF to the
         kernel holding every entry ≥ that fraction of its peak: 1e−10 (paper) changes no
         model image; quick's 1e−4 cuts the mock's 21×21 Gaussian PSF (σ = 1 pixel) to
-        9×9, losing 6e−6 of its flux, and leaves the SLACS 15×15 PSFs whole.
+        9×9, losing 6e−6 of its flux, and leaves the SLACS 15×15 PSFs whole. Quick's 2×2
+        source sub-grid (paper 4×4) makes a pixelized evaluation about 20 % faster; on
+        M1 it moved the peak of ln ε along γ (other mass parameters true) by < 0.0001
+        and gave the same MASS posterior (γ 2.086 (2.053, 2.113) against 2.088 (2.072,
+        2.111) with 4×4, truth 2.1).
     samplers : mapping of phase name to SamplerSettings
         The non-linear search of each phase. ``method="nautilus"`` falls back to
         ``dynesty_static`` with the same live points if nautilus is not installed (it is a
@@ -242,6 +247,7 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
             positions_penalty=True,
             source_pixels=500,
             overlay_shape=(24, 24),
+            sub_size=2,
             lp_sub_size=2,
             lp_sub_size_centre=8,
             psf_trim=1e-4,
