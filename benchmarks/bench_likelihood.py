@@ -3,10 +3,10 @@
 R: 0.05″ pixels, circular 3.0″ mask (~11,300 pixels), 4×4 source sub-grid, 1500
 k-means source pixels, adaptive cross (split) regularization, MGE 2×30 + point set 10,
 EPL + shear, NNLS on. Also: NNLS off, 500 source pixels, lens-light columns cached
-(the SPix/M phases keep the MGE geometry fixed), mass and source fixed while the lens
-light moves (the LIGHT phase: the source's part of the system is reused), peak memory,
-and a breakdown of one evaluation by stage so the next optimisation goes where the time
-is.
+(the SPix/M phases keep the MGE geometry fixed), the quick profile's MASS evaluation,
+mass and source fixed while the lens light moves (the LIGHT phase: the source's part of
+the system is reused), peak memory, and a breakdown of one evaluation by stage so the
+next optimisation goes where the time is.
 
 Run from the repository root: ``python benchmarks/bench_likelihood.py``.
 """
@@ -181,6 +181,21 @@ def main() -> None:
         report(f"likelihood_{label}_cached_lens_light_s", median_time(cached_lens_light))
         result = fit(dataset, model)
         print(f"log_evidence_{label}: {result.log_evidence:.3f}  chi2: {result.chi_squared:.1f}")
+    # the quick profile's MASS evaluation: 500 pixels, 2×2 source sub-grid, lens light fixed
+    quick = FitDataset.from_imaging(
+        imaging,
+        settings=replace(
+            FitSettings(), sub_size=2, lp_sub_size=2, lp_sub_size_centre=8, psf_trim=1e-4
+        ),
+        light_centre=(0.01, -0.02),
+    )
+    quick_model = make_model(quick, adapt, 500)
+
+    def quick_mass():
+        quick._source_cache.clear()
+        return fit(quick, quick_model)
+
+    report("likelihood_R500_quick_cached_lens_light_s", median_time(quick_mass))
     model = make_model(dataset, adapt, 1500)
     # LIGHT-phase pattern: mass and source fixed, the lens light moves every call
     shifted = [
