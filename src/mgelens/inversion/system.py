@@ -23,6 +23,7 @@ import numba
 import numpy as np
 from numba import prange
 from scipy import sparse
+from scipy.linalg import blas
 
 from mgelens._jit import njit
 from mgelens.convolve import separable_terms
@@ -108,7 +109,17 @@ class DenseTerms:
         """The terms of ``dense`` (N_I, n_dense); ``convolver`` (a
         :class:`mgelens.convolve.Convolver`) gives Bᵀ as a transposed blur."""
         weighted = inverse_variance[:, None] * dense
-        return cls(dense.T @ weighted, convolver.transpose_blur_columns(weighted))
+        return cls(
+            weighted_gram(dense, inverse_variance), convolver.transpose_blur_columns(weighted)
+        )
+
+
+def weighted_gram(dense: np.ndarray, inverse_variance: np.ndarray) -> np.ndarray:
+    """Lᵀ W L of dense columns L (N_I, n) as a symmetric rank-N update (BLAS syrk), half
+    the work of a general product."""
+    scaled = np.sqrt(inverse_variance)[:, None] * dense
+    upper = blas.dsyrk(1.0, scaled.T, trans=0, lower=0)  # scaled.T is Fortran-ordered
+    return upper + np.triu(upper, 1).T
 
 
 def data_vector(
@@ -144,7 +155,7 @@ def curvature_matrix(
     n_source = 0 if mapping is None else mapping.shape[1]
     f = np.empty((n_dense + n_source, n_dense + n_source))
     if dense_terms is None:
-        f[:n_dense, :n_dense] = dense.T @ (inverse_variance[:, None] * dense)
+        f[:n_dense, :n_dense] = weighted_gram(dense, inverse_variance)
     else:
         f[:n_dense, :n_dense] = dense_terms.gram
     if mapping is not None:
