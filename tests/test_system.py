@@ -6,7 +6,13 @@ from scipy import signal, sparse
 
 from mgelens.convolve import Convolver
 from mgelens.grid import pixel_centres
-from mgelens.inversion.system import DenseTerms, TilePlan, curvature_matrix, data_vector
+from mgelens.inversion.system import (
+    DenseTerms,
+    TilePlan,
+    curvature_matrix,
+    data_vector,
+    weighted_gram,
+)
 from mgelens.source.mapping import SourceWeights, mapping_matrix
 
 
@@ -86,3 +92,15 @@ def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
     assert np.allclose(only_light, expected[:4, :4])
     assert np.allclose(data_vector(dense, None, None, inverse_variance, data), d[:4])
     assert sparse.issparse(operator)
+
+
+def test_weighted_gram_is_symmetric_and_takes_no_columns(capfd):
+    """Lᵀ W L by syrk equals the general product; with no columns BLAS is not called (it
+    prints an illegal-leading-dimension error and returns garbage)."""
+    rng = np.random.default_rng(8)
+    dense, w = rng.normal(size=(50, 7)), rng.uniform(0.5, 2.0, 50)
+    gram = weighted_gram(dense, w)
+    assert np.allclose(gram, dense.T @ (w[:, None] * dense), rtol=1e-13, atol=1e-13)
+    assert np.array_equal(gram, gram.T)
+    assert weighted_gram(np.zeros((50, 0)), w).shape == (0, 0)
+    assert "illegal" not in capfd.readouterr().out

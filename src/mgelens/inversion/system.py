@@ -117,6 +117,8 @@ class DenseTerms:
 def weighted_gram(dense: np.ndarray, inverse_variance: np.ndarray) -> np.ndarray:
     """Lᵀ W L of dense columns L (N_I, n) as a symmetric rank-N update (BLAS syrk), half
     the work of a general product."""
+    if dense.shape[1] == 0:  # LAPACK rejects a leading dimension of 0
+        return np.zeros((0, 0))
     scaled = np.sqrt(inverse_variance)[:, None] * dense
     upper = blas.dsyrk(1.0, scaled.T, trans=0, lower=0)  # scaled.T is Fortran-ordered
     return upper + np.triu(upper, 1).T
