@@ -224,7 +224,7 @@ _QUICK_SAMPLERS = {
     "spix1": SamplerSettings(n_live=18, **_QUICK),
     "spix2": SamplerSettings(n_live=12, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
-    "mass": SamplerSettings(method="nautilus", n_live=50, n_eff=300),
+    "mass": SamplerSettings(method="nautilus", n_live=50, n_eff=300, f_live=0.05),
 }
 """Quick-profile samplers. SP to LIGHT: dynesty random walks (5 steps) with a loose
 stopping criterion; these phases hand their maximum-likelihood model on. SPix1 to LIGHT
@@ -237,7 +237,10 @@ SP converge to a far worse maximum. MASS, whose posterior is the result: nautilu
 live points, stopped at 300 effective samples. On M1 and M2 it took 5,400–5,900 calls and
 left 620–730 effective samples, where dynesty with 20 live points took 4,100–4,800 calls
 and left 61–68, too few for a 99.73 % interval (its 3σ intervals came out 1.6–1.8 times
-narrower); its intervals match nautilus with the paper's 150 live points (13,000 calls)."""
+narrower); its intervals match nautilus with the paper's 150 live points (13,000 calls).
+Its exploration stops when the live set holds 5 % of the evidence (anchor 1 %): on M2
+that took 8,500 calls instead of 9,300 with the same posterior (γ 1.9189 against 1.9186,
+the same 3σ limits to 1e−4); one network instead of four took 10,500 calls."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
     {
