@@ -437,7 +437,7 @@ class SourceSystem:
         terms = DenseTerms.build(dense, dataset.inverse_variance, dataset.convolver)
         q = np.empty((n_dense + self.curvature_regularization.shape[0],) * 2)
         q[:n_dense, :n_dense] = terms.gram
-        f_ls = (self.operator.mapping.T @ terms.products).T
+        f_ls = terms.lens_source(self.operator.mapping)
         q[:n_dense, n_dense:] = f_ls
         q[n_dense:, :n_dense] = f_ls.T
         q[n_dense:, n_dense:] = self.curvature_regularization

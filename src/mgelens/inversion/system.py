@@ -113,6 +113,10 @@ class DenseTerms:
             weighted_gram(dense, inverse_variance), convolver.transpose_blur_columns(weighted)
         )
 
+    def lens_source(self, mapping: sparse.spmatrix) -> np.ndarray:
+        """F_LS = Lᵀ W B f = (fᵀ Bᵀ W L)ᵀ (n_dense, n_source) for the mapping matrix f."""
+        return np.asarray(mapping.T @ self.products).T
+
 
 def weighted_gram(dense: np.ndarray, inverse_variance: np.ndarray) -> np.ndarray:
     """Lᵀ W L of dense columns L (N_I, n) as a symmetric rank-N update (BLAS syrk), half
@@ -182,7 +186,7 @@ def curvature_matrix(
                 numba.get_num_threads(),
             )
         if dense_terms is not None:
-            f_ls = np.asarray(mapping.T @ dense_terms.products).T
+            f_ls = dense_terms.lens_source(mapping)
         f[n_dense:, n_dense:] = f_ss
         f[:n_dense, n_dense:] = f_ls
         f[n_dense:, :n_dense] = f_ls.T
