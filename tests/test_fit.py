@@ -282,7 +282,7 @@ def test_non_finite_log_evidence_is_rejected_not_returned(monkeypatch, bad):
     class Result:
         log_evidence = bad
 
-    monkeypatch.setattr(fit_module, "fit", lambda dataset, model: Result())
+    monkeypatch.setattr(fit_module, "fit", lambda dataset, model, passive_start=None: Result())
     value, reason = figure_of_merit(make_dataset(), LensModel(lens_light=lens_sets()))
     assert value == REJECTED_LOG_LIKELIHOOD
     assert reason == f"log evidence is {bad}"

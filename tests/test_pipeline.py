@@ -770,3 +770,36 @@ def test_isophotes_of_a_sersic_phase(sersic_run, mock_dir, tmp_path):
     epl = phases.mass_model(folder)[0]
     assert summary["mass"]["axis_ratio"] == pytest.approx(epl.axis_ratio)
     assert summary["inputs"]["phase"] == str(folder)
+
+
+def test_nnls_warm_start_of_a_phase_changes_no_value(sersic_run, mock_dir, monkeypatch):
+    """MASS (non-negative here) starts every sample's NNLS from the passive set of the fit
+    at the prior medians with the SIE's slope 2; the values match cold starts to rounding.
+    SPix2's k-means mesh moves with its samples, so it gets no warm start."""
+    settings = sersic_settings(positive_only=True)
+    spix2 = phases.spix2_problem(mock_dir, sersic_run, settings)
+    assert phases.reference_passive_set(spix2) is None
+    problem = phases.mass_problem(mock_dir, sersic_run, settings)
+    slopes = []
+
+    def recording_fit(dataset, model, *arguments):
+        slopes.append(model.mass[0].slope)
+        return fit(dataset, model, *arguments)
+
+    monkeypatch.setattr(phases, "fit", recording_fit)
+    start = phases.reference_passive_set(problem)
+    assert slopes == [2.0]
+    assert start.dtype == bool
+    assert 0 < start.sum() < start.size
+    cold = phases.PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    warm = phases.PhaseLikelihood(problem.dataset, problem.space, problem.model, None, start)
+    rng = np.random.default_rng(2)
+    centre = problem.space.prior_transform(np.full(problem.space.n_free, 0.5))
+    points = [centre] + [
+        problem.space.prior_transform(0.5 + 0.05 * (rng.random(problem.space.n_free) - 0.5))
+        for _ in range(4)
+    ]
+    values = [(cold(x), warm(x)) for x in points]
+    assert all(c > -1e90 for c, _ in values)
+    for c, w in values:
+        assert w == pytest.approx(c, rel=1e-10, abs=1e-7)

@@ -468,8 +468,16 @@ def source_light_columns(dataset: FitDataset, mass, sets: tuple[MGESet, ...]) ->
     return dataset.convolver.blur_columns(columns, include_blurring=True)
 
 
-def fit(dataset: FitDataset, model: LensModel) -> FitResult:
+def fit(
+    dataset: FitDataset, model: LensModel, passive_start: np.ndarray | None = None
+) -> FitResult:
     """Solve all linear light and source unknowns of ``model`` and score it (SPEC §6–7).
+
+    ``passive_start`` optionally warm-starts the non-negative solve: a bool mask over the
+    unknowns (lens light, source light, then source pixels), e.g. the final passive set
+    (``~result.solution.active_zero``) of a similar model with the same unknowns. The
+    solution is the same (to rounding); only the NNLS's iterations change
+    (:func:`~mgelens.inversion.solve.solve_linear_system`).
 
     Raises one of :data:`FitError` when the sample cannot be fitted (degenerate mesh,
     non-positive-definite system, NNLS iteration cap).
@@ -531,6 +539,7 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
         positive_only=settings.positive_only,
         fixed_zero=fixed_zero,
         source_block=slice(n_dense, None) if operator is not None else None,
+        passive_start=passive_start,
     )
 
     x = solution.x
@@ -573,12 +582,14 @@ def fit(dataset: FitDataset, model: LensModel) -> FitResult:
     )
 
 
-def figure_of_merit(dataset: FitDataset, model: LensModel) -> tuple[float, str]:
+def figure_of_merit(
+    dataset: FitDataset, model: LensModel, passive_start: np.ndarray | None = None
+) -> tuple[float, str]:
     """Log evidence of ``model``, or (−1e99, reason) if the sample must be rejected: the
     fit raised one of :data:`FitError`, or a numerical failure that raised nothing left
-    the log evidence NaN or infinite (SPEC §8.4)."""
+    the log evidence NaN or infinite (SPEC §8.4). ``passive_start``: as in :func:`fit`."""
     try:
-        value = fit(dataset, model).log_evidence
+        value = fit(dataset, model, passive_start).log_evidence
     except FitError as error:
         return REJECTED_LOG_LIKELIHOOD, f"{type(error).__name__}: {error}"
     if not np.isfinite(value):

@@ -517,6 +517,12 @@ class PhaseModel:
             source=self.source.build(values),
         )
 
+    @property
+    def stable_unknowns(self) -> bool:
+        """Whether each linear unknown means the same in every sample: false only for
+        SPix2's k-means source, whose mesh is recomputed per sample."""
+        return not isinstance(self.source, KMeansSourceModel)
+
     def describe(self) -> dict:
         """Structure of the model for result files."""
         fixed = [{"kind": type(p).__name__.lower(), "fixed": True} for p in self.fixed_light]
