@@ -6,6 +6,7 @@ import tracemalloc
 
 import numpy as np
 
+from mgelens.memory import keep_freed_memory
 from mgelens.threads import limit_threads
 
 
@@ -32,8 +33,10 @@ def report(name: str, value: float, unit: str = "s") -> None:
 
 
 def set_threads(n: int = 2) -> None:
-    """n numba threads, one BLAS thread (mgelens's thread policy, mgelens.threads)."""
+    """n numba threads, one BLAS thread (mgelens's thread policy, mgelens.threads), and
+    the phase jobs' malloc thresholds (mgelens.memory)."""
     limit_threads(n)
+    keep_freed_memory()
 
 
 def timings(function, repeats: int) -> tuple[float, float, float]:

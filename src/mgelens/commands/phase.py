@@ -21,6 +21,7 @@ import logging
 from pathlib import Path
 
 from mgelens.imaging import ImagingError
+from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import phases
 from mgelens.pipeline.settings import PHASES, PROFILES, SettingsError, load_settings
 
@@ -71,6 +72,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         phases.limit_threads(args.threads)
+        keep_freed_memory()
         settings = load_settings(args.config, args.profile, args.slam).with_overrides(
             mask_radius=args.mask_radius,
             mge_sets=args.mge_sets,
