@@ -399,15 +399,16 @@ def _solve_source_first(
         _back_substitute_scatter(U, n, y, order, work, x)
         _check_source_not_flat(_finite(x)[source_block])
         return LinearSolution(x, False, np.zeros(n, dtype=bool), 0, log_det_source)
+    reduced_q, reduced_d = Q[np.ix_(free, free)], D[free]
     if start is None:
         reduced_order = np.concatenate([a, m])
         unconstrained = np.zeros(n)  # scattered back to the original index order of the NNLS
         unconstrained[reduced_order] = _finite(_reduced_solve(U, n_a, n_s, D[reduced_order], work))
         result = reconstruction_positive_only(
-            Q[np.ix_(free, free)], D[free], unconstrained=unconstrained[free]
+            reduced_q, reduced_d, unconstrained=unconstrained[free]
         )
     else:
-        result = reconstruction_positive_only(Q[np.ix_(free, free)], D[free], initial_passive=start)
+        result = reconstruction_positive_only(reduced_q, reduced_d, initial_passive=start)
     x[free] = result.x
     return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
 

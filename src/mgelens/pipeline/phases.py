@@ -279,8 +279,8 @@ def reference_passive_set(problem: PhaseProblem) -> np.ndarray | None:
     linear unknown means the same thing in every sample: the same lens-light or source
     Gaussian, or the source pixel of the same image-plane centre (SP, SPix1, LIGHT,
     MASS). On M2's MASS the posterior samples' final passive sets differ from the
-    reference in about 20 of 630 unknowns, and from the unconstrained solution's positive
-    set (the default start) in about 140: the NNLS takes about 10 instead of 40 outer
+    reference in 20–40 of 630 unknowns, and from the unconstrained solution's positive
+    set (the default start) in about 140: the NNLS takes 7–10 instead of 20–26 outer
     iterations and an evaluation 38 instead of 49 ms. LIGHT gains about 3 ms of 39; SP
     and SPix1 neither gain nor lose. ``None`` where the unknowns move (SPix2's k-means
     mesh is recomputed per sample), for the unconstrained solve, or when the reference
