@@ -803,3 +803,43 @@ def test_nnls_warm_start_of_a_phase_changes_no_value(sersic_run, mock_dir, monke
     assert all(c > -1e90 for c, _ in values)
     for c, w in values:
         assert w == pytest.approx(c, rel=1e-10, abs=1e-7)
+
+
+def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, mock_dir):
+    """The quick profile samples MASS on two k-means meshes (seeds 0 and 1) and pools the
+    runs with equal weights; the maximum-likelihood fit is rebuilt on the mesh of the run
+    that holds the highest-likelihood sample."""
+    assert profile_settings("quick").mass_meshes == 2
+    assert profile_settings("paper").mass_meshes == 1
+    summary = json.loads((sersic_run / "mass" / "result.json").read_text())
+    meshes = summary["settings"]["meshes"]
+    assert [m["kmeans_seed"] for m in meshes] == [0, 1]
+    table = pd.read_csv(sersic_run / "mass" / "samples.csv")
+    sizes = [m["n_samples"] for m in meshes]
+    assert sum(sizes) == len(table) == summary["sampler"]["n_samples"]
+    weights = table["weight"].to_numpy()
+    assert weights[: sizes[0]].sum() == pytest.approx(0.5)
+    assert weights[sizes[0] :].sum() == pytest.approx(0.5)
+    assert summary["sampler"]["n_calls"] == sum(m["n_calls"] for m in meshes)
+    assert summary["log_evidence"] == pytest.approx(np.mean([m["log_evidence"] for m in meshes]))
+    holder = [m for m in meshes if m["holds_max_likelihood"]]
+    assert len(holder) == 1
+    assert holder[0]["max_log_likelihood"] == summary["max_log_likelihood"]
+    assert summary["settings"]["model"]["source"]["kmeans_seed"] == holder[0]["kmeans_seed"]
+    # the meshes differ, so the runs' likelihoods at their own medians differ
+    assert meshes[0]["median"] != meshes[1]["median"]
+    # the written fit is the max-likelihood sample refitted on its own mesh
+    settings = sersic_settings(kmeans_seed=holder[0]["kmeans_seed"], mass_meshes=1)
+    problem = phases.mass_problem(mock_dir, sersic_run, settings)
+    values = problem.space.values(
+        table.loc[int(np.argmax(table["log_likelihood"])), list(problem.space.free_names)].to_numpy(
+            dtype=float
+        )
+    )
+    written = fits.getheader(sersic_run / "mass" / phases.MODEL_FILE)["LOGEVID"]
+    refit = fit(problem.dataset, problem.model.build(values))
+    assert refit.log_evidence == pytest.approx(written, abs=1e-6)
+    other = sersic_settings(kmeans_seed=1 - holder[0]["kmeans_seed"], mass_meshes=1)
+    problem = phases.mass_problem(mock_dir, sersic_run, other)
+    elsewhere = fit(problem.dataset, problem.model.build(values))
+    assert abs(elsewhere.log_evidence - written) > 1e-3

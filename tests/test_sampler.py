@@ -12,7 +12,9 @@ from mgelens.search.model import ParameterSpace
 from mgelens.search.priors import Uniform
 from mgelens.search.sampler import (
     CheckpointMismatchError,
+    SamplerOutput,
     SamplerSettings,
+    pool_runs,
     resolve_sample_method,
     run_nested,
 )
@@ -327,3 +329,58 @@ def test_nan_likelihood_is_an_error():
 
     with pytest.raises(FloatingPointError, match="return -1e"):
         run_nested(nan_likelihood, SPACE, FAST, log=lambda _: None)
+
+
+def _run_of(samples: np.ndarray, log_evidence: float, error: float, calls: int) -> SamplerOutput:
+    """A hand-made one-parameter run with equal weights."""
+    n = len(samples)
+    return SamplerOutput(
+        names=("x",),
+        samples=samples[:, None],
+        log_weights=np.full(n, -math.log(n)) + 3.0,  # unnormalised on purpose
+        log_likelihoods=-0.5 * samples**2,
+        log_evidence=log_evidence,
+        log_evidence_error=error,
+        n_calls=calls,
+        n_rejected=1,
+        runtime=2.0,
+        n_resumes=0,
+        method="nautilus",
+        settings={},
+        seed=7,
+    )
+
+
+def test_pooled_runs_are_an_equal_weight_mixture_whatever_their_evidence_and_size():
+    from scipy.optimize import brentq
+    from scipy.stats import norm
+
+    # exact quantile grids of N(0, 1) (2,001 samples) and N(4, 1) (20,001 samples)
+    a = norm.ppf((np.arange(2001) + 0.5) / 2001)
+    b = 4.0 + norm.ppf((np.arange(20001) + 0.5) / 20001)
+    pooled = pool_runs([_run_of(a, -10.0, 0.3, 100), _run_of(b, -50.0, 0.4, 50)])
+    weights = pooled.weights
+    assert weights[:2001].sum() == pytest.approx(0.5, abs=1e-12)
+    assert weights[2001:].sum() == pytest.approx(0.5, abs=1e-12)
+    assert weights[0] == pytest.approx(20001 / 2001 * weights[-1])
+    # the mixture 0.5 N(0, 1) + 0.5 N(4, 1): median 2, 3σ limits from its CDF
+    assert pooled.median()[0] == pytest.approx(2.0, abs=0.01)
+    lower, upper = pooled.credible_interval(3.0)
+    p = (1 - math.erf(3 / math.sqrt(2))) / 2
+    cdf = lambda x, q: 0.5 * norm.cdf(x) + 0.5 * norm.cdf(x - 4.0) - q  # noqa: E731
+    assert lower[0] == pytest.approx(brentq(cdf, -10, 10, args=(p,)), abs=0.03)
+    assert upper[0] == pytest.approx(brentq(cdf, -10, 10, args=(1 - p,)), abs=0.03)
+    assert pooled.log_evidence == pytest.approx(-30.0)
+    assert pooled.log_evidence_error == pytest.approx(math.hypot(0.5 / 2, 20.0))
+    assert (pooled.n_calls, pooled.n_rejected, pooled.runtime) == (150, 2, 4.0)
+    assert pooled.max_likelihood_index == int(np.argmin(np.abs(a)))
+
+
+def test_pooling_checks_its_runs():
+    run = _run_of(np.zeros(3), 0.0, 0.1, 1)
+    assert pool_runs([run]) is run
+    with pytest.raises(ValueError, match="no sampler runs"):
+        pool_runs([])
+    other = SamplerOutput(**{**run.__dict__, "names": ("y",)})
+    with pytest.raises(ValueError, match="different parameters"):
+        pool_runs([run, other])

@@ -5,12 +5,15 @@ Two profiles give the defaults (:data:`PROFILES`):
 * ``paper``: the paper's settings (SPEC §8.1, §8.3): live points 200 / 150 / 100 / 150 /
   150, nautilus where the paper used it, 1500 k-means source pixels, a 34×34 overlay.
 * ``quick`` (default): dynesty random walks with few live points and a looser stopping
-  criterion from SP to LIGHT, nautilus with 50 live points in MASS (whose posterior is the
-  result), 500 k-means source pixels, a 24×24 overlay, a 2×2 source sub-grid (paper
-  4×4), light profiles over-sampled 2×2 (8×8 within 0.3″ of the centre) and the PSF cut
-  at 1e−4 of its peak,
-  for the embedded default sample (M1–M3) on two cores. The MGE itself is not simplified
-  (30 Gaussians per set, SPEC §2.4).
+  criterion from SP to LIGHT, nautilus with 30 live points in MASS (whose posterior is the
+  result) on each of two source meshes, pooled, 500 k-means source pixels, a 24×24
+  overlay, a 2×2 source sub-grid (paper 4×4), light profiles over-sampled 2×2 (8×8
+  within 0.3″ of the centre) and the PSF cut at 1e−4 of its peak, for the embedded
+  default sample (M1–M3) on two cores. Its source mesh follows the continuous edge rule
+  (``edge_rule: continuous``, hull pixels solved, weighted adaptive signals), under
+  which the log evidence is a continuous function of the mass: with the anchor's rules
+  M2's MASS maximum sat on a spike 36 above the smooth trend of ln ε around it. The MGE
+  itself is not simplified (30 Gaussians per set, SPEC §2.4).
 
 A YAML file may override any field under a top-level ``slam:`` key; other top-level keys
 (the workflow's own configuration) are ignored. Per-phase sampler settings go under
@@ -93,6 +96,12 @@ class SlamSettings:
         k-means weight formula (SPEC §4.1; 2023 = paper era).
     kmeans_seed : int
         Fixed seed of the k-means mesh (SPEC §4.1).
+    mass_meshes : int
+        Source-mesh realisations of the MASS phase (k-means seeds ``kmeans_seed`` onwards,
+        SPix2's hyper-parameters in each): one nested-sampling run per mesh, the
+        posteriors pooled with equal weights (:func:`mgelens.pipeline.phases.chain_settings`).
+        1 (paper) samples SPix2's own mesh only, and the posterior is then conditional on
+        where k-means put its centres.
     interpolation : {"natural_neighbour", "nearest"}
         Source-plane interpolation.
     cross_offset : {"anchor", "paper"}
@@ -145,6 +154,7 @@ class SlamSettings:
     spix1_regularization: str = "constant"
     kmeans_scheme: str = "2023"
     kmeans_seed: int = 0
+    mass_meshes: int = 1
     interpolation: str = "natural_neighbour"
     cross_offset: str = "anchor"
     adaptive_signals: str = "anchor"
@@ -180,6 +190,10 @@ class SlamSettings:
             raise SettingsError(f"mask_radius must be > 0 arcsec, got {self.mask_radius}")
         if not 0.0 <= self.psf_trim < 1.0:
             raise SettingsError(f"psf_trim must be in [0, 1), got {self.psf_trim}")
+        if isinstance(self.mass_meshes, bool) or not (
+            isinstance(self.mass_meshes, int) and self.mass_meshes >= 1
+        ):
+            raise SettingsError(f"mass_meshes must be an integer >= 1, got {self.mass_meshes!r}")
         if self.source_pixels < 3:
             raise SettingsError(f"source_pixels must be at least 3, got {self.source_pixels}")
         if len(self.overlay_shape) != 2 or min(self.overlay_shape) < 2:
@@ -224,7 +238,7 @@ _QUICK_SAMPLERS = {
     "spix1": SamplerSettings(n_live=18, **_QUICK),
     "spix2": SamplerSettings(n_live=12, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
-    "mass": SamplerSettings(method="nautilus", n_live=50, n_eff=300, f_live=0.05),
+    "mass": SamplerSettings(method="nautilus", n_live=30, n_eff=300, f_live=0.05),
 }
 """Quick-profile samplers. SP to LIGHT: dynesty random walks (5 steps) with a loose
 stopping criterion; these phases hand their maximum-likelihood model on. SPix1 to LIGHT
@@ -233,13 +247,17 @@ use about 2 n_dim + 2 live points (dynesty needs more than 2 n_dim). SP, whose
 false mode (mass q 0.65, shear 0.07, centre 0.07″ off; max ln L −39,655 after 62,183
 calls), where 60 reached q 0.80, shear 0.006 and the true centre to 0.004″ (max ln L
 −7,019 after 27,800 calls; −7,428 with another seed). Shorter walks (3 steps) also made
-SP converge to a far worse maximum. MASS, whose posterior is the result: nautilus with 50
-live points, stopped at 300 effective samples. On M1 and M2 it took 5,400–5,900 calls and
-left 620–730 effective samples, where dynesty with 20 live points took 4,100–4,800 calls
-and left 61–68, too few for a 99.73 % interval (its 3σ intervals came out 1.6–1.8 times
-narrower); its intervals match nautilus with the paper's 150 live points (13,000 calls).
-Its exploration stops when the live set holds 5 % of the evidence (anchor 1 %): on M2
-that took 8,500 calls instead of 9,300 with the same posterior (γ 1.9189 against 1.9186,
+SP converge to a far worse maximum. MASS, whose posterior is the result: nautilus with 30
+live points per source mesh (two meshes), stopped at 300 effective samples each. On M3
+30 live points took 2,900 calls per mesh against 4,800–5,100 with 50, for the same
+posterior (θ_E 1.0964 (1.0932, 1.1000) against 1.0966 (1.0936, 1.0996) on one mesh,
+1.1045 (1.1015, 1.1084) against 1.1044 (1.1010, 1.1084) on the other). With 50 live
+points on one mesh, M1 and M2 took 5,400–5,900 calls and left 620–730 effective
+samples, where dynesty with 20 live points took 4,100–4,800 calls and left 61–68, too
+few for a 99.73 % interval (its 3σ intervals came out 1.6–1.8 times narrower); its
+intervals matched nautilus with the paper's 150 live points (13,000 calls). Its
+exploration stops when the live set holds 5 % of the evidence (anchor 1 %): on M2 that
+took 8,500 calls instead of 9,300 with the same posterior (γ 1.9189 against 1.9186,
 the same 3σ limits to 1e−4); one network instead of four took 10,500 calls."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
@@ -248,6 +266,10 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
         "quick": SlamSettings(
             profile="quick",
             positions_penalty=True,
+            edge_rule="continuous",
+            force_edge_pixels_to_zero=False,
+            adaptive_signals="weighted",
+            mass_meshes=2,
             source_pixels=500,
             overlay_shape=(24, 24),
             sub_size=2,

@@ -32,6 +32,7 @@ from mgelens.search.sampler import (
     SamplerOutput,
     SamplerSettings,
     credible_interval,
+    pool_runs,
     run_nested,
     weighted_quantile,
 )
@@ -59,6 +60,7 @@ __all__ = [
     "names_with_derived",
     "passed_prior",
     "passed_priors",
+    "pool_runs",
     "prior_from_dict",
     "run_nested",
     "shear_magnitude_and_angle",

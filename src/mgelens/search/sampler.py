@@ -39,7 +39,7 @@ import math
 import multiprocessing
 import time
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -325,6 +325,57 @@ class SamplerOutput:
             "seed": self.seed,
             "settings": self.settings,
         }
+
+
+def pool_runs(outputs: Sequence[SamplerOutput]) -> SamplerOutput:
+    """One posterior from runs of the same parameter space under equally valid likelihoods.
+
+    The pooled posterior is the equal-weight mixture of the runs' posteriors: every run's
+    weights are normalised to 1/K of the total (K runs), so that each counts the same
+    whatever its evidence. This is how the MASS phase marginalises over the k-means
+    realisation of the source mesh (:func:`mgelens.pipeline.phases.run_phase`): two
+    meshes are two discretisations of one source, and the difference in their ln Z is
+    discretisation error, not evidence for either. Samples are concatenated run by run.
+
+    ``log_evidence`` is the mean of the runs' ln Z and ``log_evidence_error`` adds their
+    own errors (in quadrature, divided by K) to the standard deviation of the ln Z values
+    (the discretisation scatter). Calls, rejections, runtimes and resumes are summed;
+    method, settings and seed are the first run's.
+
+    Raises
+    ------
+    ValueError
+        If ``outputs`` is empty or the runs have different parameters.
+    """
+    if not outputs:
+        raise ValueError("no sampler runs to pool")
+    names = outputs[0].names
+    if any(output.names != names for output in outputs):
+        raise ValueError(f"runs to pool have different parameters: {[o.names for o in outputs]}")
+    if len(outputs) == 1:
+        return outputs[0]
+    k = len(outputs)
+    log_weights = []
+    for output in outputs:
+        normalised = output.log_weights - np.logaddexp.reduce(output.log_weights)
+        log_weights.append(normalised - math.log(k))
+    log_evidences = np.array([output.log_evidence for output in outputs])
+    errors = np.array([output.log_evidence_error for output in outputs])
+    return SamplerOutput(
+        names=names,
+        samples=np.concatenate([output.samples for output in outputs]),
+        log_weights=np.concatenate(log_weights),
+        log_likelihoods=np.concatenate([output.log_likelihoods for output in outputs]),
+        log_evidence=float(log_evidences.mean()),
+        log_evidence_error=float(math.hypot(np.sqrt(np.sum(errors**2)) / k, log_evidences.std())),
+        n_calls=sum(output.n_calls for output in outputs),
+        n_rejected=sum(output.n_rejected for output in outputs),
+        runtime=sum(output.runtime for output in outputs),
+        n_resumes=sum(output.n_resumes for output in outputs),
+        method=outputs[0].method,
+        settings=outputs[0].settings,
+        seed=outputs[0].seed,
+    )
 
 
 # -- evaluation inside the sampler (main process and pool workers) ------------------------
