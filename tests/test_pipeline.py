@@ -339,6 +339,11 @@ def test_profiles_paper_and_quick():
     assert not paper.positions_penalty
     assert (paper.psf_trim, quick.psf_trim) == (1e-10, 1e-4)
     assert (paper.sub_size, quick.sub_size) == (4, 2)
+    # quick: the continuous edge rule (SPEC §4 deviations, README), MASS on two meshes
+    assert (paper.edge_rule, quick.edge_rule) == ("anchor", "continuous")
+    assert (paper.force_edge_pixels_to_zero, quick.force_edge_pixels_to_zero) == (True, False)
+    assert (paper.adaptive_signals, quick.adaptive_signals) == ("anchor", "weighted")
+    assert (paper.mass_meshes, quick.mass_meshes) == (1, 2)
 
 
 def test_fit_settings_reach_the_fit(mock_dir):
@@ -412,6 +417,9 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"force_edge_pixels_to_zero": 0}, "force_edge_pixels_to_zero must be true or false"),
         ({"adaptive_signals": "mean"}, "adaptive_signals must be one of"),
         ({"edge_rule": "smooth"}, "edge_rule must be one of"),
+        ({"mass_meshes": 0}, "mass_meshes must be an integer >= 1, got 0"),
+        ({"mass_meshes": 1.5}, "mass_meshes must be an integer >= 1"),
+        ({"mass_meshes": True}, "mass_meshes must be an integer >= 1"),
     ],
 )
 def test_invalid_settings_name_the_key(section, message):
