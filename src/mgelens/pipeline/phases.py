@@ -488,31 +488,31 @@ def _solve(
         outputs.append(run)
     output = pool_runs(outputs)
     best_run = int(np.argmax([run.log_likelihoods.max() for run in outputs]))
-    problem = problems[best_run]
+    best_problem = problems[best_run]
     phase_settings = {
         "profile": settings.profile,
         "lens_dir": str(lens_dir),
-        "mask_radius": problem.mask_radius,
-        "model": problem.model.describe(),
+        "mask_radius": best_problem.mask_radius,
+        "model": best_problem.model.describe(),
         "slam": settings.to_dict(),
-        "fit": dataclasses.asdict(problem.dataset.settings),
-        "positions": None if problem.positions is None else problem.positions.describe(),
+        "fit": dataclasses.asdict(best_problem.dataset.settings),
+        "positions": None if best_problem.positions is None else best_problem.positions.describe(),
     }
     if len(problems) > 1:
         phase_settings["meshes"] = [
-            _mesh_run_record(problem, run, k == best_run)
-            for k, (problem, run) in enumerate(zip(problems, outputs, strict=True))
+            _mesh_run_record(run_problem, run, k == best_run)
+            for k, (run_problem, run) in enumerate(zip(problems, outputs, strict=True))
         ]
     phase = PhaseResult(
-        phase=problem.name,
-        space=problem.space,
+        phase=best_problem.name,
+        space=best_problem.space,
         output=output,
         settings=phase_settings,
         input_checksums=checksums,
     )
-    values = problem.space.values(output.max_likelihood())
-    best = fit(problem.dataset, problem.model.build(values))
-    record = fit_record(best, problem.model, values)
+    values = best_problem.space.values(output.max_likelihood())
+    best = fit(best_problem.dataset, best_problem.model.build(values))
+    record = fit_record(best, best_problem.model, values)
     if isinstance(best.model.source, MGESource):
         record["positions"] = image_positions(best, settings).describe()
     _write_outputs(folder, phase, best, record, lens_dir.name)
@@ -520,7 +520,7 @@ def _solve(
         stale.unlink()
     logger.info(
         "phase %s done: ln Z = %.3f, max ln L = %.3f, %d calls (%d rejected), %.1f s",
-        problem.name,
+        best_problem.name,
         output.log_evidence,
         best.log_evidence,
         output.n_calls,
@@ -530,17 +530,21 @@ def _solve(
     return phase
 
 
+def _kmeans_seed(problem: PhaseProblem) -> int:
+    return problem.model.source.describe()["kmeans_seed"]
+
+
 def _mesh_label(problem: PhaseProblem, n_meshes: int) -> str:
     if n_meshes == 1:
         return ""
-    return f", source mesh k-means seed {problem.model.source.describe()['kmeans_seed']}"
+    return f", source mesh k-means seed {_kmeans_seed(problem)}"
 
 
 def _mesh_run_record(problem: PhaseProblem, run: SamplerOutput, holds_best: bool) -> dict:
     """Result-file entry of one source-mesh run of a pooled phase (its samples are the
     next ``n_samples`` rows of ``samples.csv``, in the order of the entries)."""
     return {
-        "kmeans_seed": problem.model.source.describe()["kmeans_seed"],
+        "kmeans_seed": _kmeans_seed(problem),
         "log_evidence": run.log_evidence,
         "max_log_likelihood": float(run.log_likelihoods.max()),
         "n_calls": run.n_calls,

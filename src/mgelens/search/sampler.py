@@ -333,7 +333,7 @@ def pool_runs(outputs: Sequence[SamplerOutput]) -> SamplerOutput:
     The pooled posterior is the equal-weight mixture of the runs' posteriors: every run's
     weights are normalised to 1/K of the total (K runs), so that each counts the same
     whatever its evidence. This is how the MASS phase marginalises over the k-means
-    realisation of the source mesh (:func:`mgelens.pipeline.phases.run_phase`): two
+    realisation of the source mesh (:func:`mgelens.pipeline.phases.chain_settings`): two
     meshes are two discretisations of one source, and the difference in their ln Z is
     discretisation error, not evidence for either. Samples are concatenated run by run.
 
