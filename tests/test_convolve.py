@@ -46,11 +46,24 @@ def test_convolution_moves_light_the_right_way():
     assert out[3, 2] == 1.0
 
 
+def fit_masks() -> dict:
+    """A disc, and an annulus with a masked bar across it: rows with two separate runs of
+    pixels, rows without any, holes the PSF reaches across."""
+    x, y = pixel_centres((31, 29), 0.1)
+    radius = np.hypot(x - 0.2, y)
+    return {
+        "disc": radius > 1.1,
+        "annulus_with_bar": (radius > 1.3) | (radius < 0.4) | (np.abs(y - 0.5) < 0.15),
+    }
+
+
+@pytest.mark.parametrize("shape", ["disc", "annulus_with_bar"])
 @pytest.mark.parametrize("include_blurring", [True, False])
 @pytest.mark.parametrize("method", ["direct", "fft", "separable"])
-def test_blur_columns_equals_masked_native_convolution(asymmetric_psf, include_blurring, method):
-    x, y = pixel_centres((31, 29), 0.1)
-    mask = np.hypot(x - 0.2, y) > 1.1
+def test_blur_columns_equals_masked_native_convolution(
+    asymmetric_psf, include_blurring, method, shape
+):
+    mask = fit_masks()[shape]
     conv = Convolver(mask, asymmetric_psf)
     in_mask = conv.input_mask(include_blurring)
     rng = np.random.default_rng(2)

@@ -78,42 +78,74 @@ def separable_terms(psf: np.ndarray, tolerance: float = SEPARABLE_TOLERANCE) -> 
 
 
 @njit(fastmath=True)
-def _separable_blur(columns, in_rows, in_cols, out_rows, out_cols, box, u, v):
-    """Blur ``columns`` (n_in, n_col) given at pixels (in_rows, in_cols) and return them at
-    (out_rows, out_cols); ``box`` = (r0, r1, c0, c1) bounds the input pixels. Per term k:
-    a row pass t[i, c] = Σ_b v_k[b] in[i, c − b + h_x] on the box rows, then
-    out[r, c] += Σ_a u_k[a] t[r − a + h_y, c]. Columns are innermost (vectorised)."""
-    r0, r1, c0, c1 = box
+def _separable_blur(columns, index_map, out_cols, out_row_ptr, pass_lo, pass_hi, u, v):
+    """Blur ``columns`` (n_in, n_col) and return them at the output pixels.
+
+    Frame: the bounding box of the input pixels. ``index_map`` (n_r, n_c) holds each box
+    pixel's row in ``columns`` (−1: no input, zero light). Output pixels of box row r are
+    ``out_row_ptr[r]:out_row_ptr[r + 1]``, at box columns ``out_cols``. Per term k: a row pass
+    t[i, c] = Σ_b v_k[b] in[i, c − b + h_x] for c in [pass_lo[i], pass_hi[i]) (the columns
+    output rows within h_y of i read), then out[r, c] += Σ_a u_k[a] t[r − a + h_y, c]. The
+    row passes live in a ring of k_y rows, so the working set stays small whatever the
+    image size; columns are innermost (vectorised).
+    """
+    n_r, n_c = index_map.shape
     n_col = columns.shape[1]
     n_terms, ky = u.shape
     kx = v.shape[1]
     hy, hx = ky // 2, kx // 2
-    oc0 = out_cols.min()
-    n_oc = out_cols.max() + 1 - oc0
-    grid = np.zeros((r1 - r0, c1 - c0, n_col))
-    for j in range(in_rows.size):
-        grid[in_rows[j] - r0, in_cols[j] - c0, :] = columns[j, :]
-    out = np.zeros((out_rows.size, n_col))
-    rows_pass = np.empty((r1 - r0, n_oc, n_col))
+    out = np.zeros((out_cols.size, n_col))
+    ring = np.empty((ky, n_c, n_col))
     for k in range(n_terms):
-        rows_pass[:] = 0.0
-        for i in range(r1 - r0):
-            for c in range(n_oc):
-                for b in range(kx):
-                    cc = c + oc0 - b + hx - c0
-                    if 0 <= cc < c1 - c0:
-                        w = v[k, b]
+        for i in range(n_r + hy):
+            if i < n_r:
+                slot = ring[i % ky]
+                for c in range(pass_lo[i], pass_hi[i]):
+                    slot[c, :] = 0.0
+                    for b in range(kx):
+                        cc = c - b + hx
+                        if 0 <= cc < n_c and index_map[i, cc] >= 0:
+                            w = v[k, b]
+                            j = index_map[i, cc]
+                            for m in range(n_col):
+                                slot[c, m] += w * columns[j, m]
+            r = i - hy
+            if r < 0:
+                continue
+            for p in range(out_row_ptr[r], out_row_ptr[r + 1]):
+                c = out_cols[p]
+                for a in range(ky):
+                    row = r - a + hy
+                    if 0 <= row < n_r:
+                        w = u[k, a]
+                        slot = ring[row % ky]
                         for m in range(n_col):
-                            rows_pass[i, c, m] += w * grid[i, cc, m]
-        for p in range(out_rows.size):
-            c = out_cols[p] - oc0
-            for a in range(ky):
-                i = out_rows[p] - a + hy - r0
-                if 0 <= i < r1 - r0:
-                    w = u[k, a]
-                    for m in range(n_col):
-                        out[p, m] += w * rows_pass[i, c, m]
+                            out[p, m] += w * slot[c, m]
     return out
+
+
+def _separable_geometry(in_mask: np.ndarray, out_mask: np.ndarray, kernel_shape) -> tuple:
+    """Index map, output pixels and row-pass column ranges of :func:`_separable_blur`
+    for inputs on the unmasked pixels of ``in_mask`` and outputs on those of ``out_mask``
+    (which must lie inside the inputs' bounding box)."""
+    rows, cols = np.nonzero(~in_mask)
+    r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    index_map = np.full((r1 - r0, c1 - c0), -1, dtype=np.int64)
+    index_map[rows - r0, cols - c0] = np.arange(rows.size)
+    out_rows, out_cols = np.nonzero(~out_mask)
+    out_rows, out_cols = out_rows - r0, out_cols - c0
+    n_r = r1 - r0
+    out_row_ptr = np.searchsorted(out_rows, np.arange(n_r + 1))
+    hy = kernel_shape[0] // 2
+    pass_lo = np.full(n_r, c1 - c0, dtype=np.int64)
+    pass_hi = np.zeros(n_r, dtype=np.int64)
+    for r in range(n_r):
+        span = out_cols[out_row_ptr[r] : out_row_ptr[r + 1]]
+        if span.size:
+            near = slice(max(r - hy, 0), min(r + hy + 1, n_r))
+            pass_lo[near] = np.minimum(pass_lo[near], span.min())
+            pass_hi[near] = np.maximum(pass_hi[near], span.max() + 1)
+    return index_map, out_cols, out_row_ptr, pass_lo, pass_hi
 
 
 def convolve_image(image: np.ndarray, psf: np.ndarray, method: str = "auto") -> np.ndarray:
@@ -261,7 +293,7 @@ class Convolver:
         elif chosen == "fft":
             out = self._blur_fft(columns, in_mask)
         elif chosen == "separable":
-            out = self._blur_separable(columns, in_mask)
+            out = self._blur_separable(columns, include_blurring)
         else:
             raise ValueError(f"unknown convolution method {method!r}")
         return out[:, 0] if vector else out
@@ -293,11 +325,14 @@ class Convolver:
         out_rows, out_cols = np.nonzero(~self.mask)
         return full[:, out_rows - r0 + ky // 2, out_cols - c0 + kx // 2].T
 
-    def _blur_separable(self, columns: np.ndarray, in_mask: np.ndarray) -> np.ndarray:
-        rows, cols = np.nonzero(~in_mask)
-        out_rows, out_cols = np.nonzero(~self.mask)
-        box = (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1)
+    @cached_property
+    def _separable_geometry(self) -> dict:
+        return {
+            blurring: _separable_geometry(self.input_mask(blurring), self.mask, self.psf.shape)
+            for blurring in (True, False)
+        }
+
+    def _blur_separable(self, columns: np.ndarray, include_blurring: bool) -> np.ndarray:
+        geometry = self._separable_geometry[include_blurring]
         u, v = self._separable_terms
-        return _separable_blur(
-            np.ascontiguousarray(columns), rows, cols, out_rows, out_cols, box, u, v
-        )
+        return _separable_blur(np.ascontiguousarray(columns), *geometry, u, v)
