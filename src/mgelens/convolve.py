@@ -104,9 +104,9 @@ def _separable_blur(columns, index_map, out_cols, out_row_ptr, pass_lo, pass_hi,
                     slot[c, :] = 0.0
                     for b in range(kx):
                         cc = c - b + hx
-                        if 0 <= cc < n_c and index_map[i, cc] >= 0:
+                        j = index_map[i, cc] if 0 <= cc < n_c else -1
+                        if j >= 0:
                             w = v[k, b]
-                            j = index_map[i, cc]
                             for m in range(n_col):
                                 slot[c, m] += w * columns[j, m]
             r = i - hy
@@ -326,13 +326,14 @@ class Convolver:
         return full[:, out_rows - r0 + ky // 2, out_cols - c0 + kx // 2].T
 
     @cached_property
-    def _separable_geometry(self) -> dict:
+    def _separable_geometries(self) -> dict:
+        """:func:`_separable_geometry` of each input region (by ``include_blurring``)."""
         return {
             blurring: _separable_geometry(self.input_mask(blurring), self.mask, self.psf.shape)
             for blurring in (True, False)
         }
 
     def _blur_separable(self, columns: np.ndarray, include_blurring: bool) -> np.ndarray:
-        geometry = self._separable_geometry[include_blurring]
+        geometry = self._separable_geometries[include_blurring]
         u, v = self._separable_terms
         return _separable_blur(np.ascontiguousarray(columns), *geometry, u, v)
