@@ -17,3 +17,22 @@ def slacs_dir() -> Path:
             "(the repository's sibling shared/data/slacs)"
         )
     return SLACS_DIR
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--recovery",
+        action="store_true",
+        help="also run the full SLaM chains on M1-M3 (marker 'recovery', 14-22 min per mock)",
+    )
+
+
+def pytest_collection_modifyitems(config, items):
+    """Skip the ``recovery`` tests unless ``--recovery`` is given (they exceed the suite's
+    15-minute budget; README "Tests")."""
+    if config.getoption("--recovery"):
+        return
+    skip = pytest.mark.skip(reason="full-chain recovery: run with --recovery -m recovery")
+    for item in items:
+        if item.get_closest_marker("recovery"):
+            item.add_marker(skip)

@@ -28,6 +28,7 @@ from mgelens.pipeline.settings import (
     profile_settings,
     settings_from_mapping,
 )
+from mgelens.recovery import true_light_refit
 from mgelens.search.priors import TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult
 from mgelens.search.sampler import SamplerOutput
@@ -851,3 +852,43 @@ def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, moc
     problem = phases.mass_problem(mock_dir, sersic_run, other)
     elsewhere = fit(problem.dataset, problem.model.build(values))
     assert abs(elsewhere.log_evidence - written) > 1e-3
+
+
+def test_max_likelihood_problem_rebuilds_each_phases_written_fit(sersic_run, sp_run, mock_dir):
+    """From result.json alone (settings, earlier phases' files, in MASS the mesh holding the
+    best sample) the rebuilt problem refits every phase's model.fits to 1e-6 in ln ε."""
+    folders = [sersic_run / phase for phase in PHASES] + [sp_run[0] / "sp"]
+    for folder in folders:
+        phase = PhaseResult.read(folder)
+        problem, values = phases.max_likelihood_problem(phase, mock_dir, folder.parent)
+        assert problem.name == phase.phase
+        written = fits.getheader(folder / phases.MODEL_FILE)["LOGEVID"]
+        refit = fit(problem.dataset, problem.model.build(values))
+        assert refit.log_evidence == pytest.approx(written, abs=1e-6), folder
+
+
+@pytest.mark.parametrize(("run", "phase"), [("sp_run", "sp"), ("sersic_run", "mass")])
+def test_true_light_refit_scores_the_fit_against_a_fixed_lens_light(run, phase, request, mock_dir):
+    """Fixing the lens light at the phase fit's own solution re-solves the same source
+    (Δχ² = Δ ln ε = 0). Any other lens light raises χ² + sᵀHs, the only ln ε terms that
+    change (same mass, mesh and regularization), so Δ ln ε < 0; that minimum over the
+    source is convex in the lens light's scale c, so it grows from c = 1 to 0.8 to 0."""
+    results = request.getfixturevalue(run)
+    results = results[0] if isinstance(results, tuple) else results
+    problem, values = phases.max_likelihood_problem(
+        PhaseResult.read(results / phase), mock_dir, results
+    )
+    model = problem.model.build(values)
+    own = fit(problem.dataset, model)
+    own_light = own.native(own.lens_light_image)
+    same = true_light_refit(problem.dataset, model, own_light)
+    assert same.chi_squared == own.chi_squared
+    assert same.log_evidence == own.log_evidence
+    assert same.delta_chi_squared == pytest.approx(0.0, abs=1e-6 * own.chi_squared)
+    assert same.delta_log_evidence == pytest.approx(0.0, abs=1e-6 * abs(own.log_evidence))
+    assert same.n_lens_light_intensities == np.count_nonzero(own.lens_light_intensities) > 0
+    dimmer = true_light_refit(problem.dataset, model, 0.8 * own_light)
+    none = true_light_refit(problem.dataset, model, 0.0 * own_light)
+    assert none.delta_log_evidence < dimmer.delta_log_evidence < 0.0
+    with pytest.raises(ValueError, match="shape"):
+        true_light_refit(problem.dataset, model, own_light[1:])

@@ -11,6 +11,7 @@ import pytest
 from mgelens import simulate
 from mgelens.grid import pixel_centres
 from mgelens.recovery import (
+    TrueLightRefit,
     lens_light_recovery,
     light_split_profile,
     mass_recovery,
@@ -124,9 +125,12 @@ def test_light_split_separates_a_trade_between_lens_and_source_from_a_total_erro
         assert row.total_error == pytest.approx(-0.01, rel=1e-9)
         assert row.source_to_lens_ratio == pytest.approx(25.0 * moved, rel=1e-12)
     assert rows[1].lens_light_error > 0.5  # the ring's annulus: a large trade, total −1 %
-    summary = recovery_summary("X", [], None, rows)
+    refit = TrueLightRefit(28, 3800.0, 10400.0, 4000.0, 10300.0, 200.0, -100.0)
+    summary = recovery_summary("X", [], None, rows, refit)
     table = recovery_table([json.loads(json.dumps(summary))])
     assert table.loc[0, "light_split.lens_light_error"] == pytest.approx(rows[1].lens_light_error)
+    assert table.loc[0, "true_light_refit.delta_log_evidence"] == -100.0
+    assert table.loc[0, "true_light_refit.delta_chi_squared"] == 200.0
     assert table.loc[0, "light_split.total_error"] == pytest.approx(-0.01, rel=1e-9)
     with pytest.raises(ValueError, match="increasing"):
         light_split_profile(lens, source, model_lens, model_source, mask, pixel_scale, centre,

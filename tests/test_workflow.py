@@ -26,14 +26,14 @@ from mgelens import simulate as sim
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def snakemake(*args: str, workdir: Path) -> subprocess.CompletedProcess:
+def snakemake(*args: str, workdir: Path, timeout: float = 600) -> subprocess.CompletedProcess:
     """Run snakemake on the repository's Snakefile with working directory ``workdir``."""
     environment = dict(os.environ, MPLBACKEND="Agg")
     environment["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{environment['PATH']}"
     return subprocess.run(
         [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"),
          "--directory", str(workdir), *args],
-        cwd=ROOT, capture_output=True, text=True, env=environment, timeout=600,
+        cwd=ROOT, capture_output=True, text=True, env=environment, timeout=timeout,
     )  # fmt: skip
 
 
@@ -377,6 +377,9 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     }
     split = recovery["light_split"]
     assert split
+    refit = recovery["true_light_refit"]
+    assert np.isfinite(refit["delta_log_evidence"])
+    assert refit["n_lens_light_intensities"] > 0
     assert all(np.isfinite(row["total_error"]) for row in split)
     recovered = pd.read_csv(tmp_path / "results" / "summary" / "recovery.csv")
     assert list(recovered["lens"]) == ["M1"]
@@ -393,3 +396,67 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert counts == {
         "isophotes": 1, "recovery": 1, "recovery_table": 1, "summary": 1, "all": 1, "total": 5
     }  # fmt: skip
+
+
+# The whole SLaM chain of one paper mock with the default (quick) configuration:
+# `snakemake -c1 results/<mock>/recovery.json` runs exactly the jobs that `snakemake -j2`
+# runs for that lens (mock, SP, SPix1, SPix2, LIGHT, MASS, recovery), and its record is
+# held to SPEC §11's criteria. One mock takes 14-22 min on one core, more than the suite's
+# budget, so these tests carry the `recovery` marker and run only with
+# `python -m pytest --recovery -m recovery` (tests/conftest.py).
+
+CHAIN_TIMEOUT = 3600
+"""Seconds one mock's chain may take (M3, the slowest, takes about 22 min on one core)."""
+
+
+@pytest.fixture(scope="module", params=["M1", "M2", "M3"])
+def chain_recovery(request, tmp_path_factory) -> dict:
+    """The recovery record (``mgelens recovery``) of one mock's quick-profile chain."""
+    lens = request.param
+    workdir = tmp_path_factory.mktemp(lens)
+    target = f"results/{lens}/recovery.json"
+    result = snakemake("-c1", target, workdir=workdir, timeout=CHAIN_TIMEOUT)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    return json.loads((workdir / target).read_text())
+
+
+@pytest.mark.recovery
+def test_chain_recovers_every_epl_parameter_within_3_sigma(chain_recovery):
+    missed = [row for row in chain_recovery["mass"] if not row["within_3sigma"]]
+    assert not missed
+    names = {row["name"] for row in chain_recovery["mass"]}
+    assert {"mass.einstein_radius", "mass.slope", "mass.axis_ratio", "mass.angle"} <= names
+    assert chain_recovery["criteria"]["epl_within_3sigma"] is True
+
+
+@pytest.mark.recovery
+def test_chain_recovers_the_einstein_radius_within_2_percent(chain_recovery):
+    assert abs(chain_recovery["einstein_radius_relative_error"]) < 0.02
+    assert chain_recovery["criteria"]["einstein_radius_within_2_percent"] is True
+
+
+@pytest.mark.recovery
+def test_chain_models_the_light_of_every_annulus_inside_the_mask(chain_recovery):
+    """Lens light plus lensed source, as a fraction of the true lens light in each annulus
+    of about 0.3″ inside the mask: the data are fitted to the noise, so the sum is right
+    even where the split between lens light and source is not."""
+    totals = [row["total_error"] for row in chain_recovery["light_split"]]
+    assert len(totals) >= 5
+    assert max(abs(total) for total in totals) < 0.05
+
+
+@pytest.mark.recovery
+def test_chain_lens_light_scores_at_least_as_well_as_the_true_one(chain_recovery):
+    """The MASS fit against the same model with the true lens light fixed: the search did
+    not stop short of the truth (Δ ln ε < 0), whatever the lens-light error."""
+    assert chain_recovery["true_light_refit"]["delta_log_evidence"] < 0.0
+
+
+@pytest.mark.recovery
+@pytest.mark.xfail(
+    strict=True,
+    reason="SPEC §11's lens light within 5 % is unmet: the chain moves 10-40 % of the lens "
+    "light into the lensed source where the source is 5-12 times brighter (issue 6)",
+)
+def test_chain_recovers_the_lens_light_within_5_percent(chain_recovery):
+    assert chain_recovery["criteria"]["lens_light_within_5_percent"] is True

@@ -62,7 +62,7 @@ from mgelens.imaging import INFO_FILE, MASK_FILE, Imaging
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
 from mgelens.pipeline import models, products
-from mgelens.pipeline.settings import PHASES, SlamSettings
+from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
 from mgelens.provenance import code_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
@@ -804,6 +804,26 @@ def chain_settings(name: str, settings: SlamSettings) -> list[SlamSettings]:
 
 
 # -- reading results back ----------------------------------------------------------------
+def max_likelihood_problem(
+    phase: PhaseResult, lens_dir: str | Path, results_dir: str | Path
+) -> tuple[PhaseProblem, dict[str, float]]:
+    """The problem of a finished phase's maximum-likelihood fit and that fit's values.
+
+    ``fit(problem.dataset, problem.model.build(values))`` is the fit of the phase's
+    ``model.fits``: the problem is rebuilt from the settings recorded in ``result.json``
+    (in a pooled MASS phase, with the k-means seed of the mesh whose run holds the
+    highest-likelihood sample) and the earlier phases' files in ``results_dir``.
+    """
+    recorded = dict(phase.settings["slam"])
+    settings = settings_from_mapping(recorded, recorded.pop("profile"), origin=RESULT_FILE)
+    best = [mesh for mesh in phase.settings.get("meshes", []) if mesh["holds_max_likelihood"]]
+    if best:
+        settings = dataclasses.replace(settings, kmeans_seed=int(best[0]["kmeans_seed"]))
+    problem = PROBLEMS[phase.phase](Path(lens_dir), Path(results_dir), settings)
+    values = problem.space.values(problem.space.vector(phase.max_likelihood))
+    return problem, values
+
+
 def _record(result_folder: str | Path) -> dict:
     path = Path(result_folder) / RESULT_FILE
     if not path.is_file():
