@@ -455,8 +455,8 @@ def test_chain_lens_light_scores_at_least_as_well_as_the_true_one(chain_recovery
 @pytest.mark.recovery
 @pytest.mark.xfail(
     strict=True,
-    reason="SPEC §11's lens light within 5 % is unmet: the chain moves 10-40 % of the lens "
-    "light into the lensed source where the source is 5-12 times brighter (issue 6)",
+    reason="SPEC §11's lens light within 5 % is unmet: the MGE and the source trade 5-50 % "
+    "of the lens light where the lensed source is brighter (README, 'The lens light')",
 )
 def test_chain_recovers_the_lens_light_within_5_percent(chain_recovery):
     assert chain_recovery["criteria"]["lens_light_within_5_percent"] is True
