@@ -892,3 +892,5 @@ def test_true_light_refit_scores_the_fit_against_a_fixed_lens_light(run, phase, 
     assert none.delta_log_evidence < dimmer.delta_log_evidence < 0.0
     with pytest.raises(ValueError, match="shape"):
         true_light_refit(problem.dataset, model, own_light[1:])
+    with pytest.raises(ValueError, match="needs a model with a source"):
+        true_light_refit(problem.dataset, dataclasses.replace(model, source=None), own_light)
