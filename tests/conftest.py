@@ -23,7 +23,7 @@ def pytest_addoption(parser):
     parser.addoption(
         "--recovery",
         action="store_true",
-        help="also run the full SLaM chains on M1-M3 (marker 'recovery', 14-22 min per mock)",
+        help="also run the full SLaM chains on M1-M3 (marker 'recovery', 16-22 min per mock)",
     )
 
 

@@ -401,7 +401,7 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
 # The whole SLaM chain of one paper mock with the default (quick) configuration:
 # `snakemake -c1 results/<mock>/recovery.json` runs exactly the jobs that `snakemake -j2`
 # runs for that lens (mock, SP, SPix1, SPix2, LIGHT, MASS, recovery), and its record is
-# held to SPEC §11's criteria. One mock takes 14-22 min on one core, more than the suite's
+# held to SPEC §11's criteria. One mock takes 16-22 min on one core, more than the suite's
 # budget, so these tests carry the `recovery` marker and run only with
 # `python -m pytest --recovery -m recovery` (tests/conftest.py).
 
