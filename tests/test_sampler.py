@@ -1,9 +1,12 @@
 """Nested sampling: evidence and posterior of a known Gaussian, rejections, resume, backends."""
 
 import math
+import platform
+import resource
 import uuid
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 
@@ -18,6 +21,7 @@ from mgelens.search.sampler import (
     resolve_sample_method,
     run_nested,
 )
+from mgelens.threads import blas_threads
 
 MEAN = np.array([0.5, -0.3])
 SIGMA = np.array([0.2, 0.4])
@@ -200,6 +204,43 @@ def test_rejections_are_counted_across_a_pool(tmp_path):
     assert output.n_rejected == len(list(tmp_path.iterdir())) > 0
     assert likelihood.calls == 0  # every call ran in a worker
     assert_recovers_gaussian(output)
+
+
+class WorkerPolicyProbe(GaussianLikelihood):
+    """The Gaussian, rejecting every call made where a phase job's policy does not hold:
+    more than one numba or BLAS thread, or freed work arrays page-faulted in again
+    (mgelens.memory; the probe of tests/test_memory.py, once per process)."""
+
+    checked = False
+
+    def __call__(self, x: np.ndarray) -> float:
+        if not self.checked:
+            type(self).checked = True
+            big = np.ones(1 << 17)  # raises glibc's adaptive thresholds, as in test_memory
+            del big
+            for _ in range(2):
+                before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+                arrays = [np.ones(1 << 16) for _ in range(10)]
+                del arrays
+            type(self).faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+        if numba.get_num_threads() != 1 or blas_threads() != 1 or self.faults > 10:
+            return REJECTED_LOG_LIKELIHOOD
+        return super().__call__(x)
+
+
+@pytest.mark.skipif(
+    platform.system() != "Linux" or platform.libc_ver()[0] != "glibc",
+    reason="mallopt thresholds are glibc's",
+)
+def test_pool_workers_run_one_thread_and_keep_freed_memory():
+    """Spawned workers inherit neither the phase job's thread limits nor its malloc
+    thresholds; the pool sets both, so two workers use two cores at full speed."""
+    settings = SamplerSettings(n_live=50, progress_every=1e9, n_processes=2)
+    likelihood = WorkerPolicyProbe()
+    output = run_nested(likelihood, SPACE, settings, seed=5, log=lambda _: None)
+    assert likelihood.calls == 0  # every call ran in a worker
+    assert output.n_calls > 0
+    assert output.n_rejected == 0
 
 
 def test_resume_reproduces_the_uninterrupted_run(tmp_path, fast_run):
