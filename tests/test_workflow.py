@@ -79,6 +79,8 @@ def test_dry_run_of_one_lens_slam_chain_runs_five_phases(tmp_path):
         "--mask-radius 1.6 --mge-sets 4 --point-set yes" in output
     )
     assert output.count("""--slam '{"profile": "quick"}'""") == 5
+    assert output.count("--point-set yes --seed 0 --slam") == 1
+    assert output.count("--seed 0") == 5  # the config's sampler_seed
     # SPix1's adapt image is a declared output and an input of SPix2, LIGHT and MASS
     assert output.count("results/M2/spix1/adapt_image.fits") >= 4
     # mocks first (a lens cannot start without its mock), then
@@ -128,6 +130,18 @@ def test_a_real_lenss_mask_and_info_files_are_phase_inputs(tmp_path):
     assert str(folder / "info.json") in inputs
 
 
+def test_sampler_seed_reaches_every_phase(tmp_path):
+    """Another sampler_seed puts that seed on every phase's command line (so changing it
+    reruns the chains: their params change)."""
+    result = snakemake(
+        "-n", "-p", "results/M3/mass/result.json", "--config", "sampler_seed=7", workdir=tmp_path
+    )
+    assert result.returncode == 0, result.stderr
+    output = result.stdout + result.stderr
+    assert output.count("--seed 7") == 5
+    assert "--seed 0" not in output
+
+
 def test_lint_is_clean(tmp_path):
     result = snakemake("--lint", workdir=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -141,6 +155,7 @@ SHEET_HEADER = "lens\tkind\tmock\tinput\tmask_radius\tmge_sets\tpoint_set\tz_len
     ("config", "sheet", "message"),
     [
         ("population_seed: -1\n", None, "population_seed"),
+        ("sampler_seed: -1\n", None, "sampler_seed"),
         ("samples: missing.tsv\n", None, "missing.tsv not found"),
         ("slam:\n  source_pixel: 500\n", None, "config: unknown key slam.source_pixel"),
         ("slam:\n  samplers: {mass: {n_live: 1}}\n", None, "slam.samplers.mass: n_live"),

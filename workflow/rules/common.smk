@@ -217,12 +217,12 @@ def phase_inputs(wildcards) -> dict:
 
 def phase_options(wildcards) -> str:
     """Per-lens CLI options from the sample sheet: the mask radius, and for LIGHT (the only
-    phase that reads them) the MGE sets and point set."""
+    phase that reads them) the MGE sets and point set; then the config's sampler seed."""
     row = LENSES.loc[wildcards.lens]
     options = f"--mask-radius {row['mask_radius']}"
     if wildcards.phase == "light":
         options += f" --mge-sets {row['mge_sets']} --point-set {row['point_set']}"
-    return options
+    return options + f" --seed {config['sampler_seed']}"
 
 
 def phase_settings(wildcards) -> str:
