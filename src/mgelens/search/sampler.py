@@ -109,7 +109,10 @@ discard_exploration
         dynesty proposals evaluated in parallel (default: ``n_processes``).
 
     The fields from ``checkpoint_every`` on change only how a run is executed, not its
-    result (except that a pool changes dynesty's random stream through ``queue_size``).
+    result, except that a pool (``n_processes > 1``) changes both samplers' random
+    streams: dynesty draws its proposals in queues of ``queue_size``, nautilus trains its
+    networks in the pool (on M1's MASS, capped at 1,200 calls, 2 workers gave other
+    samples than one process with the same seed).
     """
 
     method: str = "dynesty_static"
