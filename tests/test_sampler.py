@@ -216,12 +216,14 @@ class WorkerPolicyProbe(GaussianLikelihood):
     def __call__(self, x: np.ndarray) -> float:
         if not self.checked:
             type(self).checked = True
-            big = np.ones(1 << 17)  # raises glibc's adaptive thresholds, as in test_memory
-            del big
-            for _ in range(2):
-                before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-                arrays = [np.ones(1 << 16) for _ in range(10)]
-                del arrays
+            np.ones(1 << 17)  # a freed 1 MB array raises glibc's adaptive thresholds
+
+            def round_trip():  # ten 512 kB work arrays, freed on return
+                return len([np.ones(1 << 16) for _ in range(10)])
+
+            round_trip()
+            before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+            round_trip()
             type(self).faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
         if numba.get_num_threads() != 1 or blas_threads() != 1 or self.faults > 10:
             return REJECTED_LOG_LIKELIHOOD
