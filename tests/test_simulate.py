@@ -290,6 +290,30 @@ def test_paper_mock_sources_sit_near_the_caustic_centre(name):
     assert sim.paper_mock(name, seed=11).source != lens.source
 
 
+def test_noise_seed_changes_the_noise_alone():
+    """Another noise seed: the same lens, source and noise-free images; data that differ
+    from the mock's by pure Poisson noise (the model's residuals keep unit variance)."""
+    small = sim.Observation(image_size=41, sub_size=2)
+    own = sim.simulate(sim.paper_mock("M2"), small)
+    other_lens = sim.paper_mock("M2", noise_seed=11)
+    other = sim.simulate(other_lens, small)
+    assert other_lens.source == sim.paper_mock("M2").source
+    assert other_lens.seed == 11
+    assert "source seed 2, noise seed 11" in other_lens.recipe
+    np.testing.assert_array_equal(other.model, own.model)
+    np.testing.assert_array_equal(other.imaging.noise_map, own.imaging.noise_map)
+    assert not np.array_equal(other.imaging.data, own.imaging.data)
+    for data in (own.imaging.data, other.imaging.data):
+        residuals = (data - own.model) / own.imaging.noise_map
+        assert abs(residuals.mean()) < 0.1
+        assert 0.9 < residuals.std() < 1.1
+    expected = sim.noisy_data(own.model, small.exposure_time, small.sky, np.random.default_rng(11))
+    np.testing.assert_array_equal(other.imaging.data, expected)
+    assert sim.paper_mock("M2", noise_seed=2) == sim.paper_mock("M2")
+    with pytest.raises(ValueError, match="noise_seed must be >= 0, got -1"):
+        sim.paper_mock("M2", noise_seed=-1)
+
+
 def test_paper_mock_masses_follow_spec_table():
     rows = {"M1": (1.2, 0.80, 45, 2.1), "M2": (1.0, 0.77, 60, 1.9), "M3": (1.1, 0.75, 30, 2.0)}
     for name, (einstein_radius, q, angle, slope) in rows.items():
@@ -346,6 +370,8 @@ def test_cli_simulates_an_image_source(tmp_path):
         (["--mock", "M1", "--source-image", "nope.fits", "--source-pixel-scale", "0.01"],
          "nope.fits: source image not found"),
         (["--population-index", "2", "--seed", "4"], "--seed applies to paper mocks only"),
+        (["--population-index", "2", "--noise-seed", "4"],
+         "--noise-seed applies to paper mocks only"),
         (["--mock", "M2", "--image-size", "150"], "image_size must be an odd integer"),
         (["--mock", "M3", "--source-image", "x.fits"], "must be given together"),
     ],

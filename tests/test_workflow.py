@@ -142,6 +142,25 @@ def test_sampler_seed_reaches_every_phase(tmp_path):
     assert "--seed 0" not in output
 
 
+def test_noise_seed_rows_simulate_other_noise_realisations(tmp_path):
+    """A sheet row with a noise seed simulates its paper mock with `--noise-seed`; rows
+    without one keep the mock's own noise (the same command as before the column)."""
+    (tmp_path / "sheet.tsv").write_text(
+        SHEET_HEADER.replace("\n", "\tnoise_seed\n")
+        + "M2\tmock\tM2\t\t1.6\t4\tyes\t0.35\t1.1\t\n"
+        + "M2n11\tmock\tM2\t\t1.6\t4\tyes\t0.35\t1.1\t11\n"
+    )
+    (tmp_path / "config.yaml").write_text(f"samples: {tmp_path / 'sheet.tsv'}\n")
+    result = snakemake(
+        "-n", "-p", "results/M2n11/mock/data.fits", "results/M2/mock/data.fits",
+        "--configfile", str(tmp_path / "config.yaml"), workdir=tmp_path,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    output = result.stdout + result.stderr
+    assert "mgelens simulate --mock M2 --noise-seed 11 --name M2n11 " in output
+    assert "mgelens simulate --mock M2 --name M2 " in output
+
+
 def test_lint_is_clean(tmp_path):
     result = snakemake("--lint", workdir=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -232,10 +251,14 @@ def test_config_schema_fills_the_paper_defaults():
         ("X1\treal\tM1\tdir\t1.8\t4\tyes\t0.2\t0.6", "should not be valid"),
         ("X1\tmock\tM1\t\t1.8\t4\tmaybe\t0.2\t0.6", "'maybe' is not one of"),
         ("X 1\tmock\tM1\t\t1.8\t4\tyes\t0.2\t0.6", "'X 1' does not match"),
+        ("X1\tmock\tM1\t\t1.8\t4\tyes\t0.2\t0.6\t-3", "-3 is less than the minimum of 0"),
+        ("X1\tmock\tP4\t\t3.0\t4\tyes\t0.2\t0.6\t11", "'P4' does not match '^M[1-3]$'"),
+        ("X1\treal\t\tdir\t3.0\t4\tyes\t0.2\t0.6\t11", "'mock' is a required property"),
     ],
 )  # fmt: skip
 def test_sample_sheet_schema_rejects_bad_rows(tmp_path, row, message):
-    (tmp_path / "sheet.tsv").write_text(SHEET_HEADER + row + "\n")
+    header = SHEET_HEADER if row.count("\t") == 8 else SHEET_HEADER.replace("\n", "\tnoise_seed\n")
+    (tmp_path / "sheet.tsv").write_text(header + row + "\n")
     sheet = pd.read_csv(tmp_path / "sheet.tsv", sep="\t", dtype={"mock": str, "input": str})
     with pytest.raises(WorkflowError) as error:
         validate(sheet, str(SCHEMAS / "lenses.schema.yaml"))

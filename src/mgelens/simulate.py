@@ -29,7 +29,8 @@ modulation and Gaussian clumps, :func:`procedural_source`) or :class:`ImageSourc
 
 Randomness: every draw comes from ``numpy.random.default_rng`` seeded explicitly. A paper
 mock with seed k draws its source from ``default_rng([k, 1])`` and its noise from
-``default_rng(k)`` (k = 1, 2, 3 for M1, M2, M3). Population lens i of a population with
+``default_rng(k)`` (k = 1, 2, 3 for M1, M2, M3), or from ``default_rng(n)`` with a noise
+seed n. Population lens i of a population with
 seed S draws its lens from ``default_rng([S, i, 0])``, its source from
 ``default_rng([S, i, 1])`` and its noise from ``default_rng([S, i, 2])``, so a lens does
 not depend on how many others are drawn.
@@ -1208,28 +1209,34 @@ def _placed_source(kind: str, centre: tuple[float, float], rng: np.random.Genera
     return procedural_source(kind, placed, rng)
 
 
-def paper_mock(name: str, seed: int | None = None) -> MockLens:
-    """The paper's mock ``name`` ("M1", "M2" or "M3"), optionally with another seed.
+def paper_mock(name: str, seed: int | None = None, noise_seed: int | None = None) -> MockLens:
+    """The paper's mock ``name`` ("M1", "M2" or "M3"), optionally with other seeds.
 
     The seed (default 1, 2, 3) drives the noise (``default_rng(seed)``) and the procedural
-    source (``default_rng([seed, 1])``).
+    source (``default_rng([seed, 1])``). ``noise_seed`` replaces the seed of the noise
+    alone: the same lens and source seen through another Poisson realisation, the test of
+    whether a fit's miss is the noise image's (``MockLens.seed`` is the noise seed).
     """
     if name not in PAPER_MOCKS:
         raise ValueError(f"unknown mock {name!r}; choose one of {', '.join(PAPER_MOCKS)}")
     table = PAPER_MOCKS[name]
     seed = table.seed if seed is None else int(seed)
+    noise = seed if noise_seed is None else int(noise_seed)
+    if noise < 0:
+        raise ValueError(f"noise_seed must be >= 0, got {noise}")
     mass = (table.mass(),)
     centre = caustic_centre(mass)
     source = _placed_source(table.source_kind, centre, np.random.default_rng([seed, SOURCE_STREAM]))
+    seeds = "" if noise == seed else f"; source seed {seed}, noise seed {noise}"
     return MockLens(
         name=name,
         recipe=f"paper mock {name}: lens light = mgefit MGE of {table.lens} (SPEC 10.1), "
-        f"EPL mass (SPEC 10.2), procedural {table.source_kind} source",
+        f"EPL mass (SPEC 10.2), procedural {table.source_kind} source{seeds}",
         light=table.light(),
         mass=mass,
         source=source,
         caustic_centre=centre,
-        seed=seed,
+        seed=noise,
         z_lens=table.z_lens,
         z_source=table.z_source,
         mask_radius=table.mask_radius,

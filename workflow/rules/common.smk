@@ -154,7 +154,10 @@ def simulate_recipe(wildcards) -> str:
     recipe = LENSES.loc[wildcards.lens, "mock"]
     if recipe.startswith("P"):
         return f"--population-index {int(recipe[1:])} --population-seed {config['population_seed']}"
-    return f"--mock {recipe}"
+    noise_seed = LENSES.loc[wildcards.lens].get("noise_seed")
+    if noise_seed is None or pd.isna(noise_seed):
+        return f"--mock {recipe}"
+    return f"--mock {recipe} --noise-seed {int(noise_seed)}"
 
 
 def simulate_mem_mb(wildcards, attempt) -> int:

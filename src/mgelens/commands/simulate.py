@@ -3,6 +3,7 @@
 Examples::
 
     mgelens simulate --mock M1 --out results/M1/mock
+    mgelens simulate --mock M2 --noise-seed 11 --name M2n11 --out results/M2n11/mock
     mgelens simulate --population-index 7 --population-seed 2024 --out results/P07/mock
     mgelens simulate --mock M3 --source-image ngc3690.fits --source-pixel-scale 0.004 --out m3
 
@@ -51,6 +52,13 @@ def register(subparsers) -> None:
         help="seed of a paper mock (default 1, 2, 3 for M1, M2, M3): noise and source",
     )
     parser.add_argument(
+        "--noise-seed",
+        type=int,
+        metavar="N",
+        help="seed of a paper mock's noise alone (default: the seed): the same lens and "
+        "source under another Poisson realisation",
+    )
+    parser.add_argument(
         "--source-image", metavar="FILE", help="use this .fits/.npy image as the source"
     )
     parser.add_argument(
@@ -83,13 +91,14 @@ def register(subparsers) -> None:
 def build_lens(args: argparse.Namespace) -> simulate.MockLens:
     """The :class:`~mgelens.simulate.MockLens` described by the parsed arguments."""
     if args.mock is not None:
-        lens = simulate.paper_mock(args.mock, seed=args.seed)
+        lens = simulate.paper_mock(args.mock, seed=args.seed, noise_seed=args.noise_seed)
     else:
-        if args.seed is not None:
-            raise ValueError(
-                "--seed applies to paper mocks only; population lenses derive their seeds "
-                "from --population-seed and --population-index"
-            )
+        for option, value in (("--seed", args.seed), ("--noise-seed", args.noise_seed)):
+            if value is not None:
+                raise ValueError(
+                    f"{option} applies to paper mocks only; population lenses derive their "
+                    "seeds from --population-seed and --population-index"
+                )
         lens = simulate.population_lens(args.population_index, args.population_seed)
     if (args.source_image is None) != (args.source_pixel_scale is None):
         raise ValueError("--source-image and --source-pixel-scale must be given together")
