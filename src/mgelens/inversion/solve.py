@@ -373,6 +373,12 @@ def _solve_source_first(
     factor of the reduced system (A, M) is U_AA, U_AM and a corner Ũ with
     ŨᵀŨ = U_EMᵀU_EM + U_MMᵀU_MM (M×M, cheap). ``start`` is the NNLS's initial passive
     set over the free unknowns; without it the unconstrained solution gives it.
+
+    With ``start`` the NNLS needs no factor of Q, so only the source block (A, E) is
+    factorised, for its log det: on M2's MASS (500 source pixels, 130 lens-light
+    Gaussians) that and not copying Q when nothing is fixed save about 4 ms of 38 per
+    evaluation. A Q that is not positive definite outside the source block is then
+    noticed only through a passive block (:func:`reconstruction_positive_only`).
     """
     n = D.size
     in_source = np.zeros(n, dtype=bool)
@@ -383,34 +389,51 @@ def _solve_source_first(
     e = np.flatnonzero(in_source & ~free)
     m = np.flatnonzero(~in_source)
     n_a, n_s = a.size, a.size + e.size
-    order = np.concatenate([a, e, m])
-    U = Q[np.ix_(order, order)]
-    # U.T is Fortran-ordered: LAPACK writes L there in place, i.e. U = Lᵀ into U.
-    _, info = scipy.linalg.lapack.dpotrf(U.T, lower=1, clean=1, overwrite_a=1)
-    if info != 0:
-        raise InversionError(f"matrix not positive definite (potrf info {info})")
-    diagonal = np.diag(U)
-    log_det_source = float(2.0 * np.sum(np.log(diagonal[:n_s])))
-    work = np.empty(n)
+    reduced_q, reduced_d = (Q, D) if free.all() else (Q[np.ix_(free, free)], D[free])
     x = np.zeros(n)
+    if positive_only and start is not None:
+        # the warm-started NNLS needs no factor of Q: only ln det(F_SS + H) is wanted
+        U = _upper_cholesky(_principal_block(Q, np.concatenate([a, e])))
+        log_det_source = float(2.0 * np.sum(np.log(np.diag(U))))
+        result = reconstruction_positive_only(reduced_q, reduced_d, initial_passive=start)
+        x[free] = result.x
+        return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
+    order = np.concatenate([a, e, m])
+    U = _upper_cholesky(Q[np.ix_(order, order)])
+    log_det_source = float(2.0 * np.sum(np.log(np.diag(U)[:n_s])))
+    work = np.empty(n)
     if not positive_only:
         y = np.empty(n)
         _forward_substitute_transposed(U, n, D[order], y)
         _back_substitute_scatter(U, n, y, order, work, x)
         _check_source_not_flat(_finite(x)[source_block])
         return LinearSolution(x, False, np.zeros(n, dtype=bool), 0, log_det_source)
-    reduced_q, reduced_d = Q[np.ix_(free, free)], D[free]
-    if start is None:
-        reduced_order = np.concatenate([a, m])
-        unconstrained = np.zeros(n)  # scattered back to the original index order of the NNLS
-        unconstrained[reduced_order] = _finite(_reduced_solve(U, n_a, n_s, D[reduced_order], work))
-        result = reconstruction_positive_only(
-            reduced_q, reduced_d, unconstrained=unconstrained[free]
-        )
-    else:
-        result = reconstruction_positive_only(reduced_q, reduced_d, initial_passive=start)
+    reduced_order = np.concatenate([a, m])
+    unconstrained = np.zeros(n)  # scattered back to the original index order of the NNLS
+    unconstrained[reduced_order] = _finite(_reduced_solve(U, n_a, n_s, D[reduced_order], work))
+    result = reconstruction_positive_only(reduced_q, reduced_d, unconstrained=unconstrained[free])
     x[free] = result.x
     return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
+
+
+def _principal_block(Q: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """A C-ordered copy of Q[indices][:, indices]; a slice copy when ``indices`` is a
+    contiguous ascending range (the source block: 0.06 ms instead of 0.7 ms at n = 500)."""
+    if indices.size and np.all(np.diff(indices) == 1):
+        block = slice(indices[0], indices[-1] + 1)
+        return Q[block, block].copy()
+    return Q.take(indices, axis=0).take(indices, axis=1)
+
+
+def _upper_cholesky(U: np.ndarray) -> np.ndarray:
+    """U with UᵀU = the C-ordered matrix passed in, computed in place (upper triangle; the
+    strict lower triangle is zeroed); :class:`InversionError` if it is not positive
+    definite."""
+    # U.T is Fortran-ordered: LAPACK writes L there in place, i.e. U = Lᵀ into U.
+    _, info = scipy.linalg.lapack.dpotrf(U.T, lower=1, clean=1, overwrite_a=1)
+    if info != 0:
+        raise InversionError(f"matrix not positive definite (potrf info {info})")
+    return U
 
 
 def _reduced_solve(U: np.ndarray, n_a: int, n_s: int, b: np.ndarray, work: np.ndarray):
