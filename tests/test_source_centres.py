@@ -221,3 +221,42 @@ def test_polygon_rule_is_continuous_and_the_nearest_point_rule_is_not():
 def test_an_unknown_border_rule_is_refused():
     with pytest.raises(ValueError, match="border rule"):
         relocate_to_border(np.zeros(3), np.zeros(3), np.ones(4), np.ones(4), rule="radial")
+
+
+def reference_greedy_seeding(points, weights, k, trials, uniforms):
+    """Greedy weighted k-means++ written plainly: one numpy pass per candidate."""
+    n = len(points)
+    cumulative = np.cumsum(weights)
+    first = min(np.searchsorted(cumulative, uniforms[0] * cumulative[-1]), n - 1)
+    centres, draw = [points[first]], 1
+    closest = np.sum((points - points[first]) ** 2, axis=1)
+    for _ in range(1, k):
+        cumulative = np.cumsum(weights * closest)
+        best = None
+        for _ in range(trials):
+            pick = min(
+                np.searchsorted(cumulative, uniforms[draw] * cumulative[-1]), len(points) - 1
+            )
+            draw += 1
+            candidate = np.minimum(closest, np.sum((points - points[pick]) ** 2, axis=1))
+            potential = np.sum(weights * candidate)
+            if best is None or potential < best[0]:
+                best = (potential, pick, candidate)
+        centres.append(points[best[1]])
+        closest = best[2]
+    return np.array(centres)
+
+
+def test_compiled_kmeans_plusplus_is_the_plain_greedy_algorithm():
+    """All candidates of a step are scored in one pass over the points; the centres are
+    those of the plain one-pass-per-candidate algorithm (random weights: no ties)."""
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-1.5, 1.5, (700, 2))
+    weights = rng.uniform(0.01, 1.0, 700)
+    k = 90
+    trials = 2 + int(np.log(k))
+    uniforms = rng.random(1 + (k - 1) * trials)
+    np.testing.assert_array_equal(
+        _kmeans_plusplus(points, weights, k, trials, uniforms),
+        reference_greedy_seeding(points, weights, k, trials, uniforms),
+    )

