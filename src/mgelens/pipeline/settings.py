@@ -261,7 +261,10 @@ few for a 99.73 % interval (its 3σ intervals came out 1.6–1.8 times narrower)
 intervals matched nautilus with the paper's 150 live points (13,000 calls). Its
 exploration stops when the live set holds 5 % of the evidence (anchor 1 %): on M2 that
 took 8,500 calls instead of 9,300 with the same posterior (γ 1.9189 against 1.9186,
-the same 3σ limits to 1e−4); one network instead of four took 10,500 calls."""
+the same 3σ limits to 1e−4); one network instead of four took 10,500 calls. In the
+quick profile the four networks take 21–22 s of a mesh's ~130 s on M2 and M3; two
+trained in 9–10 s but needed 2,700 and 3,400 calls instead of 2,600 and 2,800 (same
+posteriors), so four stay."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
     {
