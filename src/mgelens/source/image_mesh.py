@@ -123,7 +123,7 @@ def _kmeans_plusplus(points, weights, k, trials, uniforms):
     candidates of a step are drawn first (they share one cumulative potential), then one
     pass over the points accumulates every candidate's potential: each potential is summed
     in point order, as one pass per candidate would, so the centres are the same to the
-    bit; M2's SPix2 (500 centres, 3,209 points, 8 candidates) takes ~5 instead of 16 ms.
+    bit; 500 centres on 3,228 points (8 candidates a step) take 9.6 instead of 15.5 ms.
     """
     n = points.shape[0]
     centres = np.empty((k, 2))
@@ -136,15 +136,13 @@ def _kmeans_plusplus(points, weights, k, trials, uniforms):
         closest[i] = (points[i, 0] - centres[0, 0]) ** 2 + (points[i, 1] - centres[0, 1]) ** 2
     candidate_x = np.empty(trials)
     candidate_y = np.empty(trials)
-    picks = np.empty(trials, dtype=np.int64)
     potentials = np.empty(trials)
     for c in range(1, k):
         cumulative = np.cumsum(weights * closest)
         for t in range(trials):
-            picks[t] = min(np.searchsorted(cumulative, uniforms[draw] * cumulative[-1]), n - 1)
+            pick = min(np.searchsorted(cumulative, uniforms[draw] * cumulative[-1]), n - 1)
             draw += 1
-            candidate_x[t] = points[picks[t], 0]
-            candidate_y[t] = points[picks[t], 1]
+            candidate_x[t], candidate_y[t] = points[pick, 0], points[pick, 1]
         potentials[:] = 0.0
         for i in range(n):
             x, y, nearest, weight = points[i, 0], points[i, 1], closest[i], weights[i]
