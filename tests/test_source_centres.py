@@ -234,9 +234,7 @@ def reference_greedy_seeding(points, weights, k, trials, uniforms):
         cumulative = np.cumsum(weights * closest)
         best = None
         for _ in range(trials):
-            pick = min(
-                np.searchsorted(cumulative, uniforms[draw] * cumulative[-1]), len(points) - 1
-            )
+            pick = min(np.searchsorted(cumulative, uniforms[draw] * cumulative[-1]), n - 1)
             draw += 1
             candidate = np.minimum(closest, np.sum((points - points[pick]) ** 2, axis=1))
             potential = np.sum(weights * candidate)
