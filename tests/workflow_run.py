@@ -1,0 +1,30 @@
+"""How the tests run the workflow: snakemake as a subprocess on the repository's
+Snakefile, from the repository root, with a working directory of the test's own."""
+
+import os
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+"""The repository root (holds the top-level Snakefile)."""
+
+CHAIN_TIMEOUT = 3600
+"""Seconds one mock's whole SLaM chain may take (M3, the slowest, takes about 22 min on
+one core)."""
+
+
+def snakemake_command(*args: str, workdir: Path) -> list[str]:
+    """Command line of snakemake on the repository's Snakefile in working directory
+    ``workdir`` (run it from :data:`ROOT` with :func:`snakemake_environment`)."""
+    return [
+        sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"),
+        "--directory", str(workdir), *args,
+    ]  # fmt: skip
+
+
+def snakemake_environment() -> dict[str, str]:
+    """Environment in which the workflow's shell commands find this interpreter's
+    ``mgelens`` and draw figures without a display."""
+    environment = dict(os.environ, MPLBACKEND="Agg")
+    environment["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{environment['PATH']}"
+    return environment
