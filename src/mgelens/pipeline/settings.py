@@ -101,7 +101,9 @@ class SlamSettings:
         SPix2's hyper-parameters in each): one nested-sampling run per mesh, the
         posteriors pooled with equal weights (:func:`mgelens.pipeline.phases.chain_settings`).
         1 (paper) samples SPix2's own mesh only, and the posterior is then conditional on
-        where k-means put its centres.
+        where k-means put its centres. With ``samplers: mass: n_processes`` ≥ 2 the runs
+        go side by side, one process each, with the one-process samples
+        (:func:`mgelens.pipeline.phases._sample_runs`).
     interpolation : {"natural_neighbour", "nearest"}
         Source-plane interpolation.
     cross_offset : {"anchor", "paper"}
