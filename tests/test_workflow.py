@@ -435,8 +435,8 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
 # `snakemake results/<mock>/recovery.json` runs exactly the jobs that `snakemake -j2`
 # runs for that lens (mock, SP, SPix1, SPix2, LIGHT, MASS, recovery), and its record is
 # held to SPEC §11's criteria. M1's chain runs with the suite: it starts before the first
-# test (tests/conftest.py, `background_chain`), overlaps the other tests, and runs the
-# phases after SP with a 2-process likelihood pool. M2's and M3's take 16-22 min each on one core,
+# test (tests/conftest.py, `background_chain`), overlaps the other tests, and runs
+# SPix2, LIGHT and MASS on 2 processes. M2's and M3's take 16-22 min each on one core,
 # beyond the suite's budget, so they carry the `recovery` marker and run only with
 # `python -m pytest --recovery -m recovery`.
 
