@@ -7,13 +7,16 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from workflow_run import CHAIN_TIMEOUT, ROOT, snakemake_command, snakemake_environment
+from workflow_run import (
+    BACKGROUND_LENS,
+    CHAIN_TIMEOUT,
+    ROOT,
+    snakemake_command,
+    snakemake_environment,
+)
 
 SLACS_DIR = ROOT.parent / "shared" / "data" / "slacs"
 """The real SLACS cutouts: ``<repo root>/../shared/data/slacs``."""
-
-BACKGROUND_LENS = "M1"
-"""The paper mock whose whole quick-profile chain runs with the normal suite."""
 
 POOLED_PHASES = "slam:\n  samplers:\n" + "".join(
     f"    {phase}: {{n_processes: 2}}\n" for phase in ("spix2", "light", "mass")
@@ -85,7 +88,7 @@ def _needs_background_chain(item: pytest.Item) -> bool:
 @pytest.fixture(scope="session", autouse=True)
 def background_chain(request, tmp_path_factory) -> Iterator[BackgroundChain | None]:
     """M1's chain, started before the first test when a selected test reads it (else
-    ``None``), so that its ~11 minutes overlap the rest of the suite; stopped at the end
+    ``None``), so that its ~13 minutes overlap the rest of the suite; stopped at the end
     of the session if a test did not wait for it."""
     if not any(_needs_background_chain(item) for item in request.session.items):
         yield None

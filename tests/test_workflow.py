@@ -17,7 +17,13 @@ import yaml
 from astropy.io import fits
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
-from workflow_run import CHAIN_TIMEOUT, ROOT, snakemake_command, snakemake_environment
+from workflow_run import (
+    BACKGROUND_LENS,
+    CHAIN_TIMEOUT,
+    ROOT,
+    snakemake_command,
+    snakemake_environment,
+)
 
 from mgelens import cli
 from mgelens import simulate as sim
@@ -444,7 +450,7 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
 @pytest.fixture(
     scope="module",
     params=[
-        pytest.param("M1", marks=pytest.mark.slow),
+        pytest.param(BACKGROUND_LENS, marks=pytest.mark.slow),
         pytest.param("M2", marks=pytest.mark.recovery),
         pytest.param("M3", marks=pytest.mark.recovery),
     ],
@@ -453,7 +459,7 @@ def chain_recovery(request, background_chain, tmp_path_factory) -> dict:
     """The recovery record (``mgelens recovery``) of one mock's quick-profile chain."""
     lens = request.param
     target = f"results/{lens}/recovery.json"
-    if lens == "M1":
+    if lens == BACKGROUND_LENS:
         workdir = background_chain.wait()
     else:
         workdir = tmp_path_factory.mktemp(lens)

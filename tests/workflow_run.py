@@ -8,6 +8,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 """The repository root (holds the top-level Snakefile)."""
 
+BACKGROUND_LENS = "M1"
+"""The paper mock whose whole quick-profile chain runs with the normal suite, in the
+background from the first test (``conftest.background_chain``)."""
+
 CHAIN_TIMEOUT = 3600
 """Seconds one mock's whole SLaM chain may take (M3, the slowest, takes about 22 min on
 one core)."""

@@ -62,14 +62,19 @@ from mgelens.grid import pixel_centres
 from mgelens.imaging import INFO_FILE, MASK_FILE, Imaging
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
-from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import models, products
 from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
 from mgelens.provenance import code_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
-from mgelens.search.sampler import SamplerOutput, SamplerSettings, pool_runs, run_nested
+from mgelens.search.sampler import (
+    SamplerOutput,
+    SamplerSettings,
+    pool_runs,
+    prepare_worker_process,
+    run_nested,
+)
 from mgelens.source.image_mesh import overlay_centres
 from mgelens.threads import limit_threads
 
@@ -455,16 +460,20 @@ def _sample_alone(
     seed: int,
     folder: Path,
 ) -> SamplerOutput:
-    """One run of :func:`_sample_runs` in a worker process: one numba and one BLAS thread,
-    freed memory kept (as in a phase job), progress lines appended to the phase log."""
-    limit_threads(1)
-    keep_freed_memory()
+    """One run of :func:`_sample_runs` in a worker process set up as a phase job
+    (:func:`~mgelens.search.sampler.prepare_worker_process`), its progress lines appended
+    to the phase log."""
+    prepare_worker_process()
     with _phase_log(folder):
         return run_nested(likelihood, space, sampler, checkpoint, seed, logger.info)
 
 
-def _sample_runs(runs: list[tuple], folder: Path) -> list[SamplerOutput]:
-    """Sample each run ``(likelihood, space, sampler settings, checkpoint, seed)``.
+def _sample_runs(
+    runs: list[tuple[PhaseLikelihood, ParameterSpace, Path, int]],
+    sampler: SamplerSettings,
+    folder: Path,
+) -> list[SamplerOutput]:
+    """Sample each run ``(likelihood, space, checkpoint, seed)`` with ``sampler``.
 
     One after the other; or, when there are several runs (MASS's source meshes) and the
     sampler has ``n_processes`` ≥ 2, up to ``n_processes`` of them side by side in worker
@@ -475,17 +484,19 @@ def _sample_runs(runs: list[tuple], folder: Path) -> list[SamplerOutput]:
     394 s; side by side took 189 s, a likelihood pool of two 207 s (other samples, 5,900
     calls against 6,500).
     """
-    sampler = runs[0][2]
     n_workers = min(sampler.n_processes, len(runs))
     if n_workers < 2:
-        return [run_nested(*run, logger.info) for run in runs]
+        return [
+            run_nested(likelihood, space, sampler, checkpoint, seed, logger.info)
+            for likelihood, space, checkpoint, seed in runs
+        ]
     alone = dataclasses.replace(sampler, n_processes=1)
     logger.info("sampling the %d runs %d at a time, one process each", len(runs), n_workers)
     with _MULTIPROCESSING.Pool(n_workers) as pool:
         return pool.starmap(
             _sample_alone,
             [(likelihood, space, alone, checkpoint, seed, folder)
-             for likelihood, space, _, checkpoint, seed in runs],
+             for likelihood, space, checkpoint, seed in runs],
         )  # fmt: skip
 
 
@@ -529,8 +540,8 @@ def _solve(
             problem.positions,
             reference_passive_set(problem),
         )
-        runs.append((likelihood, problem.space, sampler, checkpoint, run_seed))
-    outputs = _sample_runs(runs, folder)
+        runs.append((likelihood, problem.space, checkpoint, run_seed))
+    outputs = _sample_runs(runs, sampler, folder)
     output = pool_runs(outputs)
     best_run = int(np.argmax([run.log_likelihoods.max() for run in outputs]))
     best_problem = problems[best_run]

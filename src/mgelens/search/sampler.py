@@ -415,14 +415,18 @@ def _install(evaluation: _Evaluation | None) -> None:
     _current[:] = [] if evaluation is None else [evaluation]
 
 
-def _start_worker(evaluation: _Evaluation) -> None:
-    """Pool-worker initializer: one numba, BLAS and OpenMP thread per worker, freed memory
-    kept (:func:`mgelens.memory.keep_freed_memory`, as in a phase job), then
-    :func:`_install`. A spawned worker inherits neither from its parent: with numba's
-    default of all cores per worker, two workers on two cores ran M1's SP at 21 ms per
-    evaluation instead of 8.5."""
+def prepare_worker_process() -> None:
+    """Set up a spawned worker process as a phase job is set up: one numba, BLAS and
+    OpenMP thread, freed memory kept (:func:`mgelens.memory.keep_freed_memory`). A spawned
+    worker inherits neither from its parent: with numba's default of all cores per worker,
+    two workers on two cores ran M1's SP at 21 ms per evaluation instead of 8.5."""
     limit_threads(1)
     keep_freed_memory()
+
+
+def _start_worker(evaluation: _Evaluation) -> None:
+    """Pool-worker initializer: :func:`prepare_worker_process`, then :func:`_install`."""
+    prepare_worker_process()
     _install(evaluation)
 
 
