@@ -22,7 +22,7 @@ POOLED_PHASES = "slam:\n  samplers:\n" + "".join(
     f"    {phase}: {{n_processes: 2}}\n" for phase in ("spix2", "light", "mass")
 )
 """Config of the background chain: the quick profile with 2 processes in the phases that
-run after the other tests (README, ``n_processes``): a likelihood pool in SPix2 and
+run after the other tests (docs/slam.md, "Worker processes"): a likelihood pool in SPix2 and
 LIGHT, MASS's two source meshes side by side (with the samples of one process). SP and
 SPix1, which run while the other tests do, keep one process and draw the same samples
 as in ``snakemake -j2``: there a pool only adds calls (SP: 1.16 times faster alone, 19 %
@@ -102,13 +102,13 @@ def pytest_addoption(parser):
     parser.addoption(
         "--recovery",
         action="store_true",
-        help="also run the full SLaM chains on M2 and M3 (marker 'recovery', 16-22 min each)",
+        help="also run the full SLaM chains on M2 and M3 (marker 'recovery', 14-22 min each)",
     )
 
 
 def pytest_collection_modifyitems(config, items):
     """Skip the ``recovery`` tests unless ``--recovery`` is given (they exceed the suite's
-    15-minute budget; README "Tests")."""
+    15-minute budget; README "Run it")."""
     if config.getoption("--recovery"):
         return
     skip = pytest.mark.skip(reason="full-chain recovery of M2, M3: run with --recovery -m recovery")

@@ -341,7 +341,7 @@ def test_profiles_paper_and_quick():
     assert not paper.positions_penalty
     assert (paper.psf_trim, quick.psf_trim) == (1e-10, 1e-4)
     assert (paper.sub_size, quick.sub_size) == (4, 2)
-    # quick: the continuous edge rule (SPEC §4 deviations, README), MASS on two meshes
+    # quick: the continuous edge rule (SPEC §4 deviations, docs/slam.md), MASS on two meshes
     assert (paper.edge_rule, quick.edge_rule) == ("anchor", "continuous")
     assert (paper.force_edge_pixels_to_zero, quick.force_edge_pixels_to_zero) == (True, False)
     assert (paper.adaptive_signals, quick.adaptive_signals) == ("anchor", "weighted")

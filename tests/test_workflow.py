@@ -442,7 +442,7 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
 # runs for that lens (mock, SP, SPix1, SPix2, LIGHT, MASS, recovery), and its record is
 # held to SPEC §11's criteria. M1's chain runs with the suite: it starts before the first
 # test (tests/conftest.py, `background_chain`), overlaps the other tests, and runs
-# SPix2, LIGHT and MASS on 2 processes. M2's and M3's take 16-22 min each on one core,
+# SPix2, LIGHT and MASS on 2 processes. M2's and M3's take 14-22 min each on one core,
 # beyond the suite's budget, so they carry the `recovery` marker and run only with
 # `python -m pytest --recovery -m recovery`.
 
@@ -520,7 +520,7 @@ def test_chain_lens_light_scores_at_least_as_well_as_the_true_one(chain_recovery
 @pytest.mark.xfail(
     strict=True,
     reason="SPEC §11's lens light within 5 % is unmet: the MGE and the source trade 5-50 % "
-    "of the lens light where the lensed source is brighter (README, 'The lens light')",
+    "of the lens light where the lensed source is brighter (docs/slam.md, 'The lens light')",
 )
 def test_chain_recovers_the_lens_light_within_5_percent(chain_recovery):
     assert chain_recovery["criteria"]["lens_light_within_5_percent"] is True

@@ -39,7 +39,6 @@ import hashlib
 import importlib.util
 import json
 import logging
-import multiprocessing
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -69,6 +68,7 @@ from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
 from mgelens.search.sampler import (
+    SPAWN,
     SamplerOutput,
     SamplerSettings,
     pool_runs,
@@ -86,7 +86,6 @@ LOG_FILE = "phase.log"
 CHECKPOINT_PREFIX = "checkpoint-"
 IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", MASK_FILE, INFO_FILE)
 MASS_TYPES = {"SIE": SIE, "EPL": EPL, "ExternalShear": ExternalShear}
-_MULTIPROCESSING = multiprocessing.get_context("spawn")
 
 
 class PhaseInputError(ValueError):
@@ -492,7 +491,7 @@ def _sample_runs(
         ]
     alone = dataclasses.replace(sampler, n_processes=1)
     logger.info("sampling the %d runs %d at a time, one process each", len(runs), n_workers)
-    with _MULTIPROCESSING.Pool(n_workers) as pool:
+    with SPAWN.Pool(n_workers) as pool:
         return pool.starmap(
             _sample_alone,
             [(likelihood, space, alone, checkpoint, seed, folder)

@@ -57,7 +57,10 @@ from mgelens.threads import limit_threads
 
 LOGGER = logging.getLogger("mgelens.search")
 METHODS = ("dynesty_static", "dynesty_dynamic", "nautilus")
-_MULTIPROCESSING = multiprocessing.get_context("spawn")
+SPAWN = multiprocessing.get_context("spawn")
+"""Process context of every worker pool (the likelihood pool here, MASS's side-by-side
+mesh runs in :mod:`mgelens.pipeline.phases`): spawned workers, set up by
+:func:`prepare_worker_process`."""
 _STATE_ATTRIBUTE = "mgelens_state"
 
 
@@ -454,7 +457,7 @@ def _evaluating(evaluation: _Evaluation, n_processes: int) -> Iterator[object | 
         if n_processes == 1:
             yield None
         else:
-            with _MULTIPROCESSING.Pool(n_processes, _start_worker, (evaluation,)) as pool:
+            with SPAWN.Pool(n_processes, _start_worker, (evaluation,)) as pool:
                 yield pool
     finally:
         _install(None)
@@ -836,7 +839,7 @@ def run_nested(
     checkpoint = None if checkpoint_path is None else Path(checkpoint_path)
     if checkpoint is not None:
         checkpoint.parent.mkdir(parents=True, exist_ok=True)
-    evaluation = _Evaluation(log_likelihood, space, _MULTIPROCESSING.Array("q", 2))
+    evaluation = _Evaluation(log_likelihood, space, SPAWN.Array("q", 2))
     if settings.method == "nautilus":
         return _sample_nautilus(evaluation, settings, checkpoint, seed, log)
     return _sample_dynesty(evaluation, settings, checkpoint, seed, log)
