@@ -187,6 +187,208 @@ def psf_operator(in_mask: np.ndarray, out_mask: np.ndarray, psf: np.ndarray) -> 
     )
 
 
+def wrap_free_length(n_in: int, first_out: int, last_out: int, half_kernel: int) -> int:
+    """Shortest circular-convolution length that gives the linear convolution at the
+    outputs ``first_out``…``last_out`` of inputs on 0…``n_in`` − 1 (kernel half-width h).
+
+    An output i reads inputs i − h … i + h. None of them may wrap: the ones below 0 land
+    at N + (i − h), which must be ≥ ``n_in`` (the zero padding), and none may lie at or
+    beyond N. A fit mask inside its blurring region (outputs h … n − 1 − h) needs N = n,
+    not the n + 2h of a full linear convolution.
+    """
+    return max(n_in, n_in + half_kernel - first_out, last_out + half_kernel + 1)
+
+
+@njit
+def _column_boxes(columns, rows, cols):
+    """Per column, the (first row, last row, first col, last col) of its nonzero inputs at
+    frame positions (``rows``, ``cols``); (0, −1, 0, −1) for an all-zero column."""
+    n_col = columns.shape[1]
+    boxes = np.empty((n_col, 4), dtype=np.int64)
+    boxes[:, 0] = np.iinfo(np.int64).max
+    boxes[:, 1] = np.iinfo(np.int64).min
+    boxes[:, 2] = np.iinfo(np.int64).max
+    boxes[:, 3] = np.iinfo(np.int64).min
+    for j in range(columns.shape[0]):
+        r, c = rows[j], cols[j]
+        for m in range(n_col):
+            if columns[j, m] != 0.0:
+                boxes[m, 0] = min(boxes[m, 0], r)
+                boxes[m, 1] = max(boxes[m, 1], r)
+                boxes[m, 2] = min(boxes[m, 2], c)
+                boxes[m, 3] = max(boxes[m, 3], c)
+    for m in range(n_col):
+        if boxes[m, 1] < boxes[m, 0]:
+            boxes[m, :] = (0, -1, 0, -1)
+    return boxes
+
+
+@njit(fastmath=True)
+def _scatter_columns(columns, picked, origins, in_index, full_frame, stack):
+    """stack[g] = column ``picked[g]`` of ``columns`` in its window, whose top-left corner
+    is ``origins[g]`` in the frame whose pixels ``in_index`` numbers (−1: no input).
+
+    Windows of the whole frame (``full_frame``, origins 0) are filled in one pass over
+    the frame that reads each input's row of columns once; cropped windows one by one.
+    """
+    stack[:] = 0.0
+    n_r, n_c = stack.shape[1], stack.shape[2]
+    if full_frame:
+        for r in range(in_index.shape[0]):
+            for c in range(in_index.shape[1]):
+                j = in_index[r, c]
+                if j >= 0:
+                    for g in range(picked.size):
+                        stack[g, r, c] = columns[j, picked[g]]
+        return
+    for g in range(picked.size):
+        m = picked[g]
+        r_lo, c_lo = max(origins[g, 0], 0), max(origins[g, 1], 0)
+        r_hi = min(origins[g, 0] + n_r, in_index.shape[0])
+        c_hi = min(origins[g, 1] + n_c, in_index.shape[1])
+        for r in range(r_lo, r_hi):
+            for c in range(c_lo, c_hi):
+                j = in_index[r, c]
+                if j >= 0:
+                    stack[g, r - origins[g, 0], c - origins[g, 1]] = columns[j, m]
+
+
+@njit(fastmath=True)
+def _gather_columns(full, picked, origins, out_index, full_frame, out):
+    """out[p, picked[g]] = full[g] at output p's place in window g (as in
+    :func:`_scatter_columns`); outputs outside a column's window keep their zero."""
+    n_r, n_c = full.shape[1], full.shape[2]
+    if full_frame:
+        for r in range(out_index.shape[0]):
+            for c in range(out_index.shape[1]):
+                p = out_index[r, c]
+                if p >= 0:
+                    for g in range(picked.size):
+                        out[p, picked[g]] = full[g, r, c]
+        return
+    for g in range(picked.size):
+        m = picked[g]
+        r_lo, c_lo = max(origins[g, 0], 0), max(origins[g, 1], 0)
+        r_hi = min(origins[g, 0] + n_r, out_index.shape[0])
+        c_hi = min(origins[g, 1] + n_c, out_index.shape[1])
+        for r in range(r_lo, r_hi):
+            for c in range(c_lo, c_hi):
+                p = out_index[r, c]
+                if p >= 0:
+                    out[p, m] = full[g, r - origins[g, 0], c - origins[g, 1]]
+
+
+CROP_GAIN = 0.7
+"""A column is blurred in a window cropped to its nonzero inputs when the window's FFT has
+at most this fraction of the full frame's pixels."""
+
+
+@dataclass(frozen=True, eq=False)
+class _FFTGeometry:
+    """Frame and kernel spectra of the FFT route for one input region.
+
+    The frame starts at the inputs' bounding box; its size per axis is the shortest fast
+    length free of wrap-around at the outputs (:func:`wrap_free_length`). A column whose
+    nonzero inputs fill a small part of it (e.g. a narrow Gaussian) is blurred in its own
+    window instead: the box of those inputs grown by the kernel's half-widths, every
+    output it can reach inside, at a fast length (a full linear convolution there).
+    Kernels are stored rolled, so that output i of a circular convolution is the linear
+    one's at input position i. The outputs must lie inside the inputs' bounding box (as
+    the mask does in both input regions of :class:`Convolver`).
+    """
+
+    shape: tuple[int, int]
+    half: tuple[int, int]
+    psf: np.ndarray
+    in_rows: np.ndarray
+    in_cols: np.ndarray
+    in_index: np.ndarray
+    out_index: np.ndarray
+    n_out: int
+    spectra: dict
+
+    @classmethod
+    def build(cls, in_mask: np.ndarray, out_mask: np.ndarray, psf: np.ndarray) -> "_FFTGeometry":
+        rows, cols = np.nonzero(~in_mask)
+        out_rows, out_cols = np.nonzero(~out_mask)
+        r0, c0 = rows.min(), cols.min()
+        shape = []
+        for axis, (start, inputs, outputs) in enumerate(
+            ((r0, rows, out_rows), (c0, cols, out_cols))
+        ):
+            half = psf.shape[axis] // 2
+            n = wrap_free_length(
+                int(inputs.max() - start + 1),
+                int(outputs.min() - start),
+                int(outputs.max() - start),
+                half,
+            )
+            shape.append(scipy.fft.next_fast_len(n, real=True))
+        box = (rows.max() - r0 + 1, cols.max() - c0 + 1)
+        in_index = np.full(box, -1, dtype=np.int64)
+        in_index[rows - r0, cols - c0] = np.arange(rows.size)
+        out_index = np.full(box, -1, dtype=np.int64)
+        out_index[out_rows - r0, out_cols - c0] = np.arange(out_rows.size)
+        return cls(
+            shape=tuple(shape),
+            half=(psf.shape[0] // 2, psf.shape[1] // 2),
+            psf=psf,
+            in_rows=(rows - r0).astype(np.int64),
+            in_cols=(cols - c0).astype(np.int64),
+            in_index=in_index,
+            out_index=out_index,
+            n_out=int(out_rows.size),
+            spectra={},
+        )
+
+    def _spectrum(self, shape: tuple[int, int]) -> np.ndarray:
+        if shape not in self.spectra:
+            kernel = np.zeros(shape)
+            ky, kx = self.psf.shape
+            kernel[:ky, :kx] = self.psf
+            kernel = np.roll(kernel, (-self.half[0], -self.half[1]), axis=(0, 1))
+            self.spectra[shape] = scipy.fft.rfft2(kernel)
+        return self.spectra[shape]
+
+    def windows(self, columns: np.ndarray) -> dict:
+        """{FFT shape: (column indices, window origins (n, 2))} of the nonzero columns."""
+        boxes = _column_boxes(columns, self.in_rows, self.in_cols)
+        full = self.shape[0] * self.shape[1]
+        groups: dict = {}
+        for m, (r_lo, r_hi, c_lo, c_hi) in enumerate(boxes):
+            if r_hi < r_lo:
+                continue  # an all-zero column blurs to zero
+            shape = (
+                scipy.fft.next_fast_len(int(r_hi - r_lo + 1 + 2 * self.half[0]), real=True),
+                scipy.fft.next_fast_len(int(c_hi - c_lo + 1 + 2 * self.half[1]), real=True),
+            )
+            origin = (r_lo - self.half[0], c_lo - self.half[1])
+            if shape[0] * shape[1] > CROP_GAIN * full:
+                shape, origin = self.shape, (0, 0)
+            picked, origins = groups.setdefault(shape, ([], []))
+            picked.append(m)
+            origins.append(origin)
+        return {
+            shape: (np.array(picked, dtype=np.int64), np.array(origins, dtype=np.int64))
+            for shape, (picked, origins) in groups.items()
+        }
+
+    def blur(self, columns: np.ndarray) -> np.ndarray:
+        """Blurred ``columns`` (n_in, n_col) at the outputs, (n_out, n_col)."""
+        columns = np.ascontiguousarray(columns)
+        out = np.zeros((self.n_out, columns.shape[1]))
+        workers = numba.get_num_threads()  # the job's threads (mgelens.threads policy)
+        for shape, (picked, origins) in self.windows(columns).items():
+            stack = np.empty((picked.size, *shape))
+            full_frame = shape == self.shape
+            _scatter_columns(columns, picked, origins, self.in_index, full_frame, stack)
+            spectrum = scipy.fft.rfft2(stack, workers=workers, overwrite_x=True)
+            spectrum *= self._spectrum(shape)[None]
+            full = scipy.fft.irfft2(spectrum, s=shape, workers=workers, overwrite_x=True)
+            _gather_columns(full, picked, origins, self.out_index, full_frame, out)
+        return out
+
+
 @dataclass(frozen=True)
 class Convolver:
     """Blur columns defined on masked pixels and cut them back to the mask.
@@ -231,25 +433,21 @@ class Convolver:
         return psf_operator(self.extended_mask, self.mask, self.psf)
 
     @cached_property
-    def _fft_geometry(self) -> tuple:
-        rows, cols = np.nonzero(~self.extended_mask)
-        r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
-        ky, kx = self.psf.shape
-        shape = (
-            scipy.fft.next_fast_len(r1 - r0 + ky - 1, real=True),
-            scipy.fft.next_fast_len(c1 - c0 + kx - 1, real=True),
-        )
-        kernel_fft = scipy.fft.rfft2(self.psf, s=shape)
-        return (r0, r1, c0, c1), shape, kernel_fft
+    def _fft_geometries(self) -> dict:
+        """:class:`_FFTGeometry` of each input region (by ``include_blurring``)."""
+        return {
+            blurring: _FFTGeometry.build(self.input_mask(blurring), self.mask, self.psf)
+            for blurring in (True, False)
+        }
 
     @cached_property
     def _separable_terms(self) -> tuple:
         return separable_terms(self.psf)
 
-    def _method_for(self, n_in: int, method: str) -> str:
+    def _method_for(self, n_in: int, include_blurring: bool, method: str) -> str:
         if method != "auto":
             return method
-        _, shape, _ = self._fft_geometry
+        shape = self._fft_geometries[include_blurring].shape
         n_terms = self._separable_terms[0].shape[0]
         costs = {
             "direct": _direct_cost(self.psf, n_in),
@@ -287,11 +485,11 @@ class Convolver:
                 f"columns have {columns.shape[0]} rows but the input region has "
                 f"{np.count_nonzero(~in_mask)} pixels"
             )
-        chosen = self._method_for(columns.shape[0], method)
+        chosen = self._method_for(columns.shape[0], include_blurring, method)
         if chosen == "direct":
             out = self.operator(include_blurring) @ columns
         elif chosen == "fft":
-            out = self._blur_fft(columns, in_mask)
+            out = self._fft_geometries[include_blurring].blur(columns)
         elif chosen == "separable":
             out = self._blur_separable(columns, include_blurring)
         else:
@@ -310,20 +508,6 @@ class Convolver:
     @cached_property
     def _flipped(self) -> "Convolver":
         return Convolver(self.mask, self.psf[::-1, ::-1].copy())
-
-    def _blur_fft(self, columns: np.ndarray, in_mask: np.ndarray) -> np.ndarray:
-        (r0, r1, c0, c1), shape, kernel_fft = self._fft_geometry
-        ky, kx = self.psf.shape
-        n_col = columns.shape[1]
-        stack = np.zeros((n_col, r1 - r0, c1 - c0))
-        rows, cols = np.nonzero(~in_mask)
-        stack[:, rows - r0, cols - c0] = columns.T
-        workers = numba.get_num_threads()  # the job's threads (mgelens.threads policy)
-        spectrum = scipy.fft.rfft2(stack, s=shape, workers=workers)
-        spectrum *= kernel_fft[None]
-        full = scipy.fft.irfft2(spectrum, s=shape, workers=workers)
-        out_rows, out_cols = np.nonzero(~self.mask)
-        return full[:, out_rows - r0 + ky // 2, out_cols - c0 + kx // 2].T
 
     @cached_property
     def _separable_geometries(self) -> dict:

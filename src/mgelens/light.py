@@ -27,7 +27,10 @@ from mgelens.convolve import Convolver
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from, to_profile_frame
 from mgelens.grid import SubGrid, adaptive_sub_sizes, pixel_centres, sub_grid
 
-EXPONENT_CUTOFF = 100.0  # exp(−100) ≈ 4e−44: Gaussian terms beyond this are dropped
+EXPONENT_CUTOFF = 40.0
+"""Gaussian terms exp(−e) with e ≥ 40 are dropped: exp(−40) ≈ 4e−18 of a Gaussian's own peak,
+below double precision, while a narrow Gaussian's column then stays zero (and unblurred)
+beyond 8.9 of its major-axis σ (:class:`mgelens.convolve.Convolver` crops its FFT there)."""
 
 _EXP_STEPS = 64
 _EXP_TABLE = np.exp2(-np.arange(int(EXPONENT_CUTOFF * _EXP_STEPS / np.log(2.0)) + 2) / _EXP_STEPS)
@@ -292,8 +295,24 @@ def _exp_negative(e, table):
     )
 
 
+@njit(inline="always")
+def _first_within_cutoff(rr, inv_two_sigma2):
+    """First k with rr · inv_two_sigma2[k] < EXPONENT_CUTOFF (``inv_two_sigma2`` strictly
+    decreasing, as σ grows along a set); its size if there is none."""
+    lo, hi = 0, inv_two_sigma2.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rr * inv_two_sigma2[mid] < EXPONENT_CUTOFF:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
 @njit(parallel=True, fastmath=True)
 def _gaussian_columns(x, y, starts, sub_sizes, xc, yc, q, phi, inv_two_sigma2, table):
+    """Binned unit Gaussians; at each sub-pixel only the Gaussians whose exponent is below
+    :data:`EXPONENT_CUTOFF` are evaluated (the narrower ones contribute exactly zero)."""
     n_pix = starts.size
     n_g = inv_two_sigma2.size
     out = np.empty((n_pix, n_g))
@@ -309,10 +328,8 @@ def _gaussian_columns(x, y, starts, sub_sizes, xc, yc, q, phi, inv_two_sigma2, t
             xp = dx * cos_phi + dy * sin_phi
             yp = -dx * sin_phi + dy * cos_phi
             rr = q2 * xp * xp + yp * yp
-            for k in range(n_g):  # branch-free, so the loop over Gaussians vectorises
-                exponent = min(rr * inv_two_sigma2[k], EXPONENT_CUTOFF)
-                value = _exp_negative(exponent, table)
-                acc[k] += value if exponent < EXPONENT_CUTOFF else 0.0
+            for k in range(_first_within_cutoff(rr, inv_two_sigma2), n_g):
+                acc[k] += _exp_negative(rr * inv_two_sigma2[k], table)
         for k in range(n_g):
             out[p, k] = acc[k] / n_sub
     return out
