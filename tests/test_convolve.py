@@ -198,3 +198,35 @@ def test_fft_frame_of_a_disc_in_its_blurring_region_needs_no_padding(asymmetric_
     padded = conv._fft_geometries[False].shape
     assert padded[0] >= rows.max() - rows.min() + 1 + 2  # half-height of the 5×3 kernel
     assert padded[1] >= cols.max() - cols.min() + 1 + 1
+
+
+@pytest.mark.parametrize("shape", ["disc", "annulus_with_bar"])
+@pytest.mark.parametrize("include_blurring", [True, False])
+def test_fft_blur_of_compact_columns_equals_native_convolution(
+    asymmetric_psf, include_blurring, shape
+):
+    """Columns that are zero outside small boxes (a narrow Gaussian's) are blurred in
+    windows cropped to them: boxes at the frame's corners and edges, one pixel, an all-zero
+    column, and a dense one sharing the call."""
+    mask = fit_masks()[shape]
+    conv = Convolver(mask, asymmetric_psf)
+    in_mask = conv.input_mask(include_blurring)
+    rows, cols = np.nonzero(~in_mask)
+    rng = np.random.default_rng(5)
+    extremes = [0, rows.size - 1, np.argmin(cols), np.argmax(cols), rows.size // 2]
+    boxes = [(rows[j], cols[j], size) for j, size in zip(extremes, (3, 5, 4, 2, 1), strict=True)]
+    columns = np.zeros((rows.size, len(boxes) + 2))
+    for k, (r, c, size) in enumerate(boxes):
+        inside = (np.abs(rows - r) <= size // 2) & (np.abs(cols - c) <= size // 2)
+        assert inside.any()
+        columns[inside, k] = rng.random(inside.sum())
+    columns[:, -1] = rng.random(rows.size)  # dense; column -2 stays zero
+    windows = conv._fft_geometries[include_blurring].windows(columns)
+    assert len(windows) > 1  # some columns did go to cropped windows
+    out = conv.blur_columns(columns, include_blurring, "fft")
+    for k in range(columns.shape[1]):
+        native = np.zeros(mask.shape)
+        native[~in_mask] = columns[:, k]
+        expected = signal.convolve2d(native, asymmetric_psf, mode="same")[~mask]
+        assert np.allclose(out[:, k], expected, atol=1e-14)
+    assert not out[:, -2].any()
