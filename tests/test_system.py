@@ -45,16 +45,19 @@ def gaussian_kernel(shape, sigma_y, sigma_x):
 
 
 @pytest.mark.parametrize("tile_size", [1, 3, 8])
-@pytest.mark.parametrize("kernel", ["random", "gaussian", "two_gaussians"])
+@pytest.mark.parametrize("kernel", ["random", "random_7x7", "gaussian", "two_gaussians"])
 def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
-    """Rows of G built directly (random kernel, full rank) or by row and column passes
-    (one or two separable terms) give the same F = Mᵀ W M as dense products."""
+    """Rows of G built by direct summation or by the stencil route (full-rank kernels:
+    5×3 takes the stencil for tiles of 1 and 3, direct summation for 8; 7×7 always the
+    stencil) or by row and column passes (one or two separable terms) give the same
+    F = Mᵀ W M as dense products."""
     rng = np.random.default_rng(4)
     x, y = pixel_centres((23, 21), 0.1)
     mask = np.hypot(x - 0.1, y) > 0.95
     n_pixels = np.count_nonzero(~mask)
     psf = {
         "random": rng.random((5, 3)),
+        "random_7x7": rng.random((7, 7)),
         "gaussian": gaussian_kernel((7, 5), 1.3, 0.9),
         "two_gaussians": gaussian_kernel((9, 9), 1.0, 1.0)
         + 0.2 * gaussian_kernel((9, 9), 2.5, 1.5),
@@ -74,7 +77,9 @@ def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
     data = rng.normal(size=n_pixels)
     full = np.hstack([dense, blurred])
     plan = TilePlan.from_mask(mask, psf, tile_size)
-    assert plan.psf_u.shape[0] == {"random": 0, "gaussian": 1, "two_gaussians": 2}[kernel]
+    ranks = {"random": 0, "random_7x7": 0, "gaussian": 1, "two_gaussians": 2}
+    assert plan.psf_u.shape[0] == ranks[kernel]
+    assert plan.stencil == (kernel == "random_7x7" or (kernel == "random" and tile_size < 8))
     operator = convolver.operator(include_blurring=False)
     curvature = curvature_matrix(dense, f, plan, inverse_variance)
     expected = full.T @ (inverse_variance[:, None] * full)
