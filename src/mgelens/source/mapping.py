@@ -56,6 +56,18 @@ def mapping_matrix(weights: SourceWeights) -> sparse.csr_matrix:
     return sparse.csr_matrix((values, indices, indptr), shape=(weights.n_pixels, weights.n_source))
 
 
+@njit(inline="always")
+def _insertion_sort(values, start, end):
+    """Sort ``values[start:end]`` in place (a pixel's few mesh points: no allocation)."""
+    for i in range(start + 1, end):
+        key = values[i]
+        k = i - 1
+        while k >= start and values[k] > key:
+            values[k + 1] = values[k]
+            k -= 1
+        values[k + 1] = key
+
+
 @njit
 def _merge_sub_pixels(indptr, indices, values, n_sub, n_source):
     n_pixels = (indptr.size - 1) // n_sub
@@ -75,7 +87,7 @@ def _merge_sub_pixels(indptr, indices, values, n_sub, n_source):
                 out_indices[count] = j
                 count += 1
             accumulated[j] += values[p]
-        out_indices[start:count] = np.sort(out_indices[start:count])
+        _insertion_sort(out_indices, start, count)
         for q in range(start, count):
             out_values[q] = accumulated[out_indices[q]] / n_sub
         out_indptr[pixel + 1] = count
