@@ -87,6 +87,8 @@ def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
     assert np.allclose(curvature, curvature.T)
     d = data_vector(dense, f, operator, inverse_variance, data)
     assert np.allclose(d, full.T @ (inverse_variance * data))
+    known = operator.T @ (inverse_variance * data)  # Bᵀ W d, as a dataset caches it
+    assert np.array_equal(data_vector(dense, f, None, inverse_variance, data, known), d)
     terms = DenseTerms.build(dense, inverse_variance, convolver)
     assert np.allclose(terms.products, operator.T @ (inverse_variance[:, None] * dense))
     cached = curvature_matrix(dense, f, plan, inverse_variance, dense_terms=terms)

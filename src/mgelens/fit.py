@@ -183,6 +183,12 @@ class FitDataset:
         return self.convolver.operator(include_blurring=False)
 
     @cached_property
+    def blurred_weighted_data(self) -> np.ndarray:
+        """Bᵀ W d (N_I,): the pixelized source's part of the data vector before the
+        mapping matrix, the same for every fit without fixed light."""
+        return self.source_psf_operator.T @ (self.inverse_variance * self.data)
+
+    @cached_property
     def tile_plan(self) -> TilePlan:
         """Tiling of the masked pixels for the source curvature matrix."""
         return TilePlan.from_mask(self.mask, self.convolver.psf)
@@ -513,7 +519,12 @@ def fit(
 
     residual_data = dataset.data - fixed
     d = data_vector(
-        dense, mapping, dataset.source_psf_operator, dataset.inverse_variance, residual_data
+        dense,
+        mapping,
+        dataset.source_psf_operator,
+        dataset.inverse_variance,
+        residual_data,
+        None if model.fixed_light or mapping is None else dataset.blurred_weighted_data,
     )
     if system is None:
         terms = (

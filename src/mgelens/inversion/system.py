@@ -147,12 +147,19 @@ def data_vector(
     psf_operator: sparse.csr_matrix | None,
     inverse_variance: np.ndarray,
     residual_data: np.ndarray,
+    blurred_weighted: np.ndarray | None = None,
 ) -> np.ndarray:
-    """D = [L | B f]ᵀ W r; ``mapping`` f and ``psf_operator`` B may be None (no source)."""
+    """D = [L | B f]ᵀ W r; ``mapping`` f and ``psf_operator`` B may be None (no source).
+
+    ``blurred_weighted``, if given, is Bᵀ W r already computed (it does not change while
+    the data and any fixed light do: :attr:`mgelens.fit.FitDataset.blurred_weighted_data`).
+    """
     weighted = inverse_variance * residual_data
     parts = [dense.T @ weighted]
     if mapping is not None:
-        parts.append(mapping.T @ (psf_operator.T @ weighted))
+        if blurred_weighted is None:
+            blurred_weighted = psf_operator.T @ weighted
+        parts.append(mapping.T @ blurred_weighted)
     return np.concatenate(parts)
 
 
