@@ -8,12 +8,17 @@ mass and source fixed while the lens light moves (the LIGHT phase: the source's 
 the system is reused), peak memory, and a breakdown of one evaluation by stage so the
 next optimisation goes where the time is.
 
-Run from the repository root: ``python benchmarks/bench_likelihood.py``.
+Run from the repository root: ``python benchmarks/bench_likelihood.py``. ``--threads 1 2 4 8``
+also times configuration R at each thread count (numba threads; BLAS keeps one), printing
+``likelihood_R_threads_<n>_s``; counts above the machine's cores need
+``NUMBA_NUM_THREADS=8`` in the environment, since numba fixes its pool at import.
 """
 
+import argparse
 import time
 from dataclasses import replace
 
+import numba
 import numpy as np
 from common import median_time, peak_memory_mb, report, set_threads
 
@@ -161,8 +166,31 @@ def breakdown(dataset: FitDataset, model: LensModel) -> dict[str, float]:
     return times
 
 
+def thread_scaling(counts: list[int]) -> None:
+    """Configuration R's median time at each numba thread count in ``counts``."""
+    imaging, lensed = mock_imaging()
+    dataset = FitDataset.from_imaging(imaging, light_centre=(0.01, -0.02))
+    model = make_model(dataset, lensed[~dataset.mask], 1500)
+    for n in counts:
+        set_threads(n)
+        report(f"likelihood_R_threads_{n}_s", median_time(lambda: fresh_fit(dataset, model)))
+
+
 def main() -> None:
-    set_threads(2)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--threads", type=int, nargs="+", default=[2], help="numba thread counts (default 2)"
+    )
+    args = parser.parse_args()
+    available = numba.config.NUMBA_NUM_THREADS
+    if max(args.threads) > available or min(args.threads) < 1:
+        parser.error(
+            f"thread counts must be 1..{available} (numba's pool); raise NUMBA_NUM_THREADS "
+            "in the environment for more"
+        )
+    if len(args.threads) > 1:
+        thread_scaling(args.threads)
+    set_threads(args.threads[0])
     imaging, lensed = mock_imaging()
     dataset = FitDataset.from_imaging(imaging, light_centre=(0.01, -0.02))
     adapt = lensed[~dataset.mask]

@@ -148,7 +148,7 @@ def brightest_centre(dataset, radius: float = 0.5) -> tuple[float, float]:
 
 
 def phase_calls(lens_dir: Path, settings, einstein_radius: float, n_calls: int, seed: int):
-    """{phase: (dataset, [LensModel per call], passive_start or None)}."""
+    """{phase: (dataset, PhaseModel, [values per call], passive_start or None)}."""
     rng = np.random.default_rng(seed)
     probe, _ = load_dataset(lens_dir, settings, settings.mask_centre)
     centre = brightest_centre(probe)
@@ -191,8 +191,8 @@ def phase_calls(lens_dir: Path, settings, einstein_radius: float, n_calls: int, 
         passive = None
         if model.stable_unknowns and settings.positive_only:
             passive = ~fit(dataset_copy, model.build(base)).solution.active_zero
-        lens_models = [model.build(jittered(base, phase, rng)) for _ in range(n_calls)]
-        calls[phase] = (dataset_copy, lens_models, passive)
+        draws = [jittered(base, phase, rng) for _ in range(n_calls)]
+        calls[phase] = (dataset_copy, model, draws, passive)
     return calls, dataset, centre
 
 
@@ -221,12 +221,18 @@ def stage_times(profile: cProfile.Profile, n_calls: int) -> dict[str, float]:
 def run(calls: dict, n_calls: int) -> tuple[dict, dict, dict]:
     """Median wall and CPU ms per call, and stage ms per call, of every phase."""
     timings, cpu_timings, stages = {}, {}, {}
-    for phase, (dataset, lens_models, passive) in calls.items():
-        figure_of_merit(dataset, lens_models[0], passive)  # warm-up (compiles, fills caches)
+    for phase, (dataset, model, values, passive) in calls.items():
+
+        def call(v, dataset=dataset, model=model, passive=passive):
+            """One sampler call: the lens model of the values, then the fit (as
+            :class:`mgelens.pipeline.phases.PhaseLikelihood`; SPix2's k-means included)."""
+            return figure_of_merit(dataset, model.build(v), passive)
+
+        call(values[0])  # warm-up (compiles, fills caches)
         times, cpu_times = [], []
-        for model in lens_models:
+        for v in values:
             start, start_cpu = time.perf_counter(), time.process_time()
-            _, reason = figure_of_merit(dataset, model, passive)
+            _, reason = call(v)
             times.append(time.perf_counter() - start)
             cpu_times.append(time.process_time() - start_cpu)
             if reason:
@@ -236,8 +242,8 @@ def run(calls: dict, n_calls: int) -> tuple[dict, dict, dict]:
         profile = cProfile.Profile()
         profile.enable()
         start = time.perf_counter()
-        for model in lens_models:
-            figure_of_merit(dataset, model, passive)
+        for v in values:
+            call(v)
         profiled = 1e3 * (time.perf_counter() - start) / n_calls
         profile.disable()
         stage = stage_times(profile, n_calls)
