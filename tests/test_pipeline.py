@@ -541,6 +541,8 @@ def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):
     assert "phase sp" in (folder / "phase.log").read_text()
     positions = summary["max_likelihood_fit"]["positions"]
     assert positions["threshold"] >= 0.2
+    assert summary["converged"] is True
+    assert summary["stop_reason"].startswith("remaining Δln Z = ")
 
 
 @pytest.mark.parametrize(
@@ -693,6 +695,7 @@ def sersic_settings(**changes):
             "positive_only": False,
             "source_pixels": 60,
             "overlay_shape": [8, 8],
+            "allow_unconverged": True,
             "samplers": {
                 p: {**capped, "method": "dynesty_static", "max_iterations": n}
                 for p, n in iterations.items()
@@ -704,7 +707,8 @@ def sersic_settings(**changes):
 
 @pytest.fixture(scope="module")
 def sersic_run(mock_dir, tmp_path_factory):
-    """The five phases with ``lens_light_model: sersic`` and capped samplers (plumbing)."""
+    """The five phases with ``lens_light_model: sersic`` and capped samplers (plumbing:
+    each phase builds on unconverged earlier ones)."""
     results = tmp_path_factory.mktemp("sersic")
     settings = sersic_settings()
     for phase in PHASES:
@@ -715,6 +719,25 @@ def sersic_run(mock_dir, tmp_path_factory):
 def _components(folder):
     record = json.loads((folder / "result.json").read_text())["max_likelihood_fit"]
     return record["lens_light"]["components"]
+
+
+def test_capped_phases_record_that_they_did_not_converge(sersic_run):
+    """The Sérsic chain's samplers are capped: each result says so, with a WARNING."""
+    for phase in PHASES:
+        summary = json.loads((sersic_run / phase / "result.json").read_text())
+        assert summary["converged"] is False
+        assert "stopped at max_iterations" in summary["stop_reason"]  # MASS: per mesh
+        assert "WARNING mgelens.pipeline: phase" in (sersic_run / phase / "phase.log").read_text()
+
+
+def test_a_phase_refuses_an_unconverged_earlier_phase(sersic_run, mock_dir, tmp_path):
+    shutil.copytree(sersic_run / "sp", tmp_path / "sp")
+    settings = sersic_settings(allow_unconverged=False)
+    message = r"sp/result\.json is not converged \(stopped at max_iterations = 60.*allow_unconv"
+    with pytest.raises(phases.PhaseInputError, match=message):
+        phases.run_phase("spix1", mock_dir, tmp_path, settings)
+    assert not (tmp_path / "spix1" / "result.json").exists()
+    assert phases.read_phase(tmp_path, "sp", allow_unconverged=True).result.phase == "sp"
 
 
 def test_sersic_chain_fixes_sps_sersics_in_the_spix_phases(sersic_run, mock_dir):

@@ -157,6 +157,11 @@ def test_max_iterations_caps_the_run_with_a_warning(fast_run):
     assert len(output.samples) in (150, 151)
     assert len(fast_run.samples) > 500
     assert any("WARNING stopped at max_iterations = 50" in line for line in lines)
+    assert not output.converged
+    assert output.stop_reason.startswith("stopped at max_iterations = 50 with remaining Δln Z")
+    assert fast_run.converged
+    assert fast_run.stop_reason.startswith("remaining Δln Z = ")
+    assert fast_run.statistics()["converged"] is True
     with pytest.raises(ValueError, match="dynesty samplers only"):
         SamplerSettings(method="nautilus", max_iterations=10)
     with pytest.raises(ValueError, match="max_iterations must be >= 1"):
@@ -181,6 +186,9 @@ def test_max_calls_caps_the_run_with_a_warning(settings):
     # counted against it), nautilus after the batch (100 calls) that reaches it
     assert 300 <= output.n_calls == likelihood.calls <= 300 + 2 * 100
     assert any("WARNING stopped at max_calls = 300" in line for line in lines)
+    assert not output.converged
+    assert "stopped at max_calls = 300" in output.stop_reason
+    assert output.statistics()["converged"] is False
     with pytest.raises(ValueError, match="max_calls must be >= 1"):
         SamplerSettings(method=settings.method, max_calls=0)
 
@@ -427,3 +435,7 @@ def test_pooling_checks_its_runs():
     other = SamplerOutput(**{**run.__dict__, "names": ("y",)})
     with pytest.raises(ValueError, match="different parameters"):
         pool_runs([run, other])
+    capped = SamplerOutput(**{**run.__dict__, "converged": False, "stop_reason": "capped"})
+    pooled = pool_runs([run, capped])
+    assert not pooled.converged
+    assert "run 2: capped" in pooled.stop_reason

@@ -367,6 +367,7 @@ mock:
   sub_size: 4
 slam:
   profile: quick
+  allow_unconverged: true
   source_pixels: 120
   overlay_shape: [12, 12]
   samplers:
@@ -377,7 +378,7 @@ slam:
     mass: {{max_calls: 250}}
 """
 """A one-lens sample with every sampler capped (MASS is the quick profile's nautilus): the
-DAG's plumbing, not a lens model."""
+DAG's plumbing, not a lens model, so each phase builds on unconverged earlier phases."""
 
 
 @pytest.mark.slow

@@ -153,13 +153,15 @@ class EarlierPhase:
             )
 
 
-def read_phase(results_dir: str | Path, name: str) -> EarlierPhase:
+def read_phase(results_dir: str | Path, name: str, allow_unconverged: bool = False) -> EarlierPhase:
     """The finished phase ``name`` in ``results_dir``.
 
     Raises
     ------
     PhaseInputError
-        If its ``result.json`` is missing, naming the command that makes it.
+        If its ``result.json`` is missing, naming the command that makes it, or records a
+        sampler that did not converge (unless ``allow_unconverged``,
+        ``slam.allow_unconverged``).
     """
     folder = Path(results_dir) / name
     if not (folder / RESULT_FILE).is_file():
@@ -168,7 +170,22 @@ def read_phase(results_dir: str | Path, name: str) -> EarlierPhase:
             f"(mgelens phase {name} --results {results_dir} ...)"
         )
     record = _record(folder)
-    return EarlierPhase(folder, PhaseResult.read(folder), record)
+    result = PhaseResult.read(folder)
+    if not (result.output.converged or allow_unconverged):
+        raise PhaseInputError(
+            f"{folder / RESULT_FILE} is not converged ({result.output.stop_reason}): rerun "
+            f"phase {name!r} without the cap or with more live points, or set "
+            "slam.allow_unconverged: true to build on it anyway"
+        )
+    return EarlierPhase(folder, result, record)
+
+
+def earlier_phases(
+    results_dir: str | Path, settings: SlamSettings, *names: str
+) -> tuple[EarlierPhase, ...]:
+    """The finished phases ``names`` (:func:`read_phase` with the settings'
+    ``allow_unconverged``)."""
+    return tuple(read_phase(results_dir, name, settings.allow_unconverged) for name in names)
 
 
 def resolve_mask_radius(lens_dir: Path, settings: SlamSettings) -> float:
@@ -573,6 +590,15 @@ def _solve(
     _write_outputs(folder, phase, best, record, lens_dir.name)
     for stale in folder.glob(f"{CHECKPOINT_PREFIX}*"):
         stale.unlink()
+    if not output.converged:
+        logger.warning(
+            "phase %s of %s did not converge (%s): %s records converged: false, and later "
+            "phases refuse it unless slam.allow_unconverged is true",
+            best_problem.name,
+            lens_dir,
+            output.stop_reason,
+            folder / RESULT_FILE,
+        )
     logger.info(
         "phase %s done: ln Z = %.3f, max ln L = %.3f, %d calls (%d rejected), %.1f s",
         best_problem.name,
@@ -677,7 +703,7 @@ def sp_light_model(sp: EarlierPhase, source: models.SourceModel) -> models.Phase
 
 def spix1_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """SPix1: lens light fixed (SP), SIE + shear passed from SP, overlay mesh (8)."""
-    sp = read_phase(results_dir, "sp")
+    (sp,) = earlier_phases(results_dir, settings, "sp")
     sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
     x, y = overlay_centres(dataset.mask, dataset.imaging.pixel_scale, settings.overlay_shape)
@@ -720,7 +746,7 @@ def _kmeans_source(
 def spix2_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """SPix2: lens light (SP) and mass (SPix1) fixed, k-means mesh + AdaptiveBrightnessSplit
     hyper-parameters free (5)."""
-    sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
+    sp, spix1 = earlier_phases(results_dir, settings, "sp", "spix1")
     sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
     source, adapt_path = _kmeans_source(dataset, results_dir, settings)
@@ -737,8 +763,7 @@ def spix2_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> 
 def light_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """LIGHT: MGE refit (N×30 + point set) or 3 Sérsics, mass (SPix1) and source (SPix2)
     fixed."""
-    sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
-    spix2 = read_phase(results_dir, "spix2")
+    sp, spix1, spix2 = earlier_phases(results_dir, settings, "sp", "spix1", "spix2")
     sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
     kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
@@ -763,9 +788,7 @@ def light_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> 
 def mass_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """MASS: lens light (LIGHT) and source (SPix2) fixed, EPL + shear (8); the 3×Sérsic
     chain fits LIGHT's Sérsics together with the mass (22)."""
-    sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
-    spix2 = read_phase(results_dir, "spix2")
-    light = read_phase(results_dir, "light")
+    sp, spix1, spix2, light = earlier_phases(results_dir, settings, "sp", "spix1", "spix2", "light")
     light.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(light.result))
     kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)

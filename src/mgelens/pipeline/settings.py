@@ -138,6 +138,11 @@ class SlamSettings:
         M1 it moved the peak of ln ε along γ (other mass parameters true) by < 0.0001
         and gave the same MASS posterior (γ 2.086 (2.053, 2.113) against 2.088 (2.072,
         2.111) with 4×4, truth 2.1).
+    allow_unconverged : bool
+        Let a phase build on an earlier phase whose sampler did not converge (its
+        ``result.json`` says ``converged: false``, e.g. capped by ``max_calls``). Off, such a
+        phase stops with a message naming the file (:func:`mgelens.pipeline.phases.read_phase`);
+        on, for smoke tests of the plumbing.
     samplers : mapping of phase name to SamplerSettings
         The non-linear search of each phase. ``method="nautilus"`` falls back to
         ``dynesty_static`` with the same live points if nautilus is not installed (it is a
@@ -172,6 +177,7 @@ class SlamSettings:
     lp_centre_radius: float = 0.3
     use_border: bool = True
     psf_trim: float = 1e-10
+    allow_unconverged: bool = False
     samplers: Mapping[str, SamplerSettings] = field(default_factory=dict)
 
     def __post_init__(self):

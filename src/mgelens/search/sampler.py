@@ -253,6 +253,13 @@ class SamplerOutput:
     settings : dict
         :meth:`SamplerSettings.to_dict` of the run.
     seed : int
+    converged : bool
+        Whether the sampler met its stopping criterion (dynesty static: the remaining
+        Δln Z below ``dlogz``; dynamic: its own criterion; nautilus: ``f_live``,
+        ``n_shell`` and ``n_eff``) rather than a cap (``max_iterations``, ``max_calls``) or
+        a likelihood plateau. A run that did not converge has an unreliable posterior.
+    stop_reason : str
+        Why the sampler stopped, in words (recorded in result files).
     """
 
     names: tuple[str, ...]
@@ -268,6 +275,8 @@ class SamplerOutput:
     method: str
     settings: dict
     seed: int
+    converged: bool = True
+    stop_reason: str = ""
 
     def __post_init__(self):
         samples = np.asarray(self.samples, dtype=float).reshape(-1, len(self.names))
@@ -332,6 +341,8 @@ class SamplerOutput:
             "runtime_s": self.runtime,
             "n_resumes": self.n_resumes,
             "seed": self.seed,
+            "converged": self.converged,
+            "stop_reason": self.stop_reason,
             "settings": self.settings,
         }
 
@@ -349,7 +360,8 @@ def pool_runs(outputs: Sequence[SamplerOutput]) -> SamplerOutput:
     ``log_evidence`` is the mean of the runs' ln Z and ``log_evidence_error`` adds their
     own errors (in quadrature, divided by K) to the standard deviation of the ln Z values
     (the discretisation scatter). Calls, rejections, runtimes and resumes are summed;
-    method, settings and seed are the first run's.
+    method, settings and seed are the first run's. The pool converged if every run did;
+    its stop reason lists each run's.
 
     Raises
     ------
@@ -384,6 +396,10 @@ def pool_runs(outputs: Sequence[SamplerOutput]) -> SamplerOutput:
         method=outputs[0].method,
         settings=outputs[0].settings,
         seed=outputs[0].seed,
+        converged=all(output.converged for output in outputs),
+        stop_reason="; ".join(
+            f"run {k + 1}: {output.stop_reason}" for k, output in enumerate(outputs)
+        ),
     )
 
 
@@ -573,7 +589,9 @@ def _new_dynesty_sampler(settings: SamplerSettings, n_dim: int, seed: int, pool)
 
 def _run_dynesty(
     sampler, settings: SamplerSettings, progress, checkpoint: str | None, resume, calls_so_far
-):
+) -> tuple[bool, str]:
+    """Run (or continue) a dynesty sampler; return (converged, stop reason)."""
+    maxcall = None if settings.max_calls is None else max(settings.max_calls - calls_so_far, 1)
     common = {
         "print_progress": True,
         "print_func": progress,
@@ -581,13 +599,52 @@ def _run_dynesty(
         "checkpoint_every": settings.checkpoint_every,
         "resume": resume,
         "maxiter": settings.max_iterations,
-        "maxcall": None
-        if settings.max_calls is None
-        else max(settings.max_calls - calls_so_far, 1),
+        "maxcall": maxcall,
     }
-    with warnings.catch_warnings():  # mgelens logs its own warning for max_iterations
+    iterations_before, calls_before = sampler.it, sampler.ncall
+    with warnings.catch_warnings():  # mgelens logs its own warning for the caps
         warnings.filterwarnings("ignore", "The sampling was stopped short", UserWarning)
         _run_dynesty_quietly(sampler, settings, common)
+    cap = _reached_cap(
+        settings, maxcall, sampler.it - iterations_before, sampler.ncall - calls_before
+    )
+    if settings.method == "dynesty_dynamic":
+        if cap:
+            return False, f"stopped at {cap} before the dynamic stopping criterion was reached"
+        return True, "dynamic stopping criterion reached"
+    delta, dlogz = final_delta_log_evidence(sampler), _static_dlogz(settings)
+    if delta < dlogz:
+        return True, f"remaining Δln Z = {delta:.4g} below dlogz = {dlogz:.4g}"
+    stop = f"stopped at {cap}" if cap else "stopped on a likelihood plateau"
+    return False, f"{stop} with remaining Δln Z = {delta:.4g} above dlogz = {dlogz:.4g}"
+
+
+def _reached_cap(settings: SamplerSettings, maxcall: int | None, iterations, calls) -> str:
+    """The cap that ended a dynesty session ("" if none), judged on dynesty's own counts:
+    dynesty stops once its session's iterations or calls pass the caps it was given. Its
+    call count leaves out the first live points, so mgelens's own call counter, which
+    includes them, can end below ``max_calls`` for a run that the cap stopped."""
+    if settings.max_iterations is not None and iterations >= settings.max_iterations:
+        return f"max_iterations = {settings.max_iterations}"
+    if maxcall is not None and calls >= maxcall:
+        return f"max_calls = {settings.max_calls}"
+    return ""
+
+
+def _static_dlogz(settings: SamplerSettings) -> float:
+    """The static sampler's stopping threshold: ``dlogz`` or dynesty's default."""
+    return 1e-3 * (settings.n_live - 1) + 0.01 if settings.dlogz is None else settings.dlogz
+
+
+def final_delta_log_evidence(sampler) -> float:
+    """Remaining Δln Z = ln(Z + L_max X) − ln Z of a finished static dynesty run, where
+    it stopped: the value dynesty compared with ``dlogz`` (Z and the prior volume X at the
+    last dead point, L_max the best final live point; the final live points are the last
+    ``nlive`` entries of the run)."""
+    run = sampler.saved_run
+    last = len(run["logl"]) - sampler.nlive - 1
+    live_max = float(np.max(run["logl"][last + 1 :]))
+    return float(np.logaddexp(0.0, live_max + run["logvol"][last] - run["logz"][last]))
 
 
 def _run_dynesty_quietly(sampler, settings: SamplerSettings, common: dict) -> None:
@@ -645,18 +702,12 @@ def _sample_dynesty(
             setattr(sampler, _STATE_ATTRIBUTE, state)
             progress = _ProgressLine(log, settings.progress_every, state, settings.method)
             checkpoint = None if checkpoint_path is None else str(checkpoint_path)
-            _run_dynesty(sampler, settings, progress, checkpoint, resume, stored["n_calls"])
-            if settings.max_iterations and sampler.results.niter >= settings.max_iterations:
-                log(
-                    f"{settings.method}: WARNING stopped at max_iterations = "
-                    f"{settings.max_iterations} before dlogz was reached: not converged"
-                )
-            if settings.max_calls and evaluation.counts[0] >= settings.max_calls:
-                log(
-                    f"{settings.method}: WARNING stopped at max_calls = {settings.max_calls} "
-                    "before dlogz was reached: not converged"
-                )
-            final = state.snapshot(finished=True)
+            converged, reason = _run_dynesty(
+                sampler, settings, progress, checkpoint, resume, stored["n_calls"]
+            )
+            if not converged:
+                log(f"{settings.method}: WARNING {reason}: not converged")
+            final = {**state.snapshot(finished=True), "converged": converged, "reason": reason}
             if checkpoint_path is not None:
                 setattr(sampler, _STATE_ATTRIBUTE, final)
                 _save_dynesty(sampler, checkpoint_path)
@@ -676,6 +727,8 @@ def _sample_dynesty(
         method=settings.method,
         settings=settings.to_dict(),
         seed=seed,
+        converged=final["converged"],
+        stop_reason=final["reason"],
     )
     log(_summary_line(output))
     return output
@@ -751,19 +804,25 @@ def _sample_nautilus(
         )
         log(f"nautilus: {space.n_free} free parameters, seed {seed}, {sampler.n_like} calls so far")
         cap = math.inf if settings.max_calls is None else settings.max_calls
-        while not sampler.run(
-            f_live=settings.f_live,
-            n_shell=settings.n_shell,
-            n_eff=settings.n_eff,
-            n_like_max=cap,
-            discard_exploration=settings.discard_exploration,
-            timeout=max(settings.progress_every, NAUTILUS_MIN_PROGRESS_INTERVAL),
-            verbose=False,
-        ):
+        options = {
+            "f_live": settings.f_live,
+            "n_shell": settings.n_shell,
+            "n_eff": settings.n_eff,
+            "n_like_max": cap,
+            "discard_exploration": settings.discard_exploration,
+            "timeout": max(settings.progress_every, NAUTILUS_MIN_PROGRESS_INTERVAL),
+            "verbose": False,
+        }
+        converged = sampler.run(**options)
+        while not converged and sampler.n_like < cap:
             log(_nautilus_progress(sampler, time.perf_counter() - started))
-            if sampler.n_like >= cap:
-                log(f"nautilus: WARNING stopped at max_calls = {cap}: not converged")
-                break
+            converged = sampler.run(**options)
+        criteria = f"f_live {settings.f_live}, n_shell {settings.n_shell}, n_eff {settings.n_eff}"
+        if converged:
+            reason = f"stopping criteria reached ({criteria})"
+        else:
+            reason = f"stopped at max_calls = {settings.max_calls} before {criteria} were reached"
+            log(f"nautilus: WARNING {reason}: not converged")
         points, log_w, log_l = sampler.posterior()
         all_log_l = np.concatenate([np.asarray(v, dtype=float) for v in sampler.log_l])
         n_calls = int(sampler.n_like)
@@ -785,6 +844,8 @@ def _sample_nautilus(
         method=settings.method,
         settings=settings.to_dict(),
         seed=seed,
+        converged=converged,
+        stop_reason=reason,
     )
     log(_summary_line(output))
     return output
