@@ -1,5 +1,6 @@
 """Nested sampling: evidence and posterior of a known Gaussian, rejections, resume, backends."""
 
+import json
 import math
 import platform
 import resource
@@ -287,6 +288,22 @@ def test_resume_reproduces_the_uninterrupted_run(tmp_path, fast_run):
     other = ParameterSpace.from_priors({"toy.x": Uniform(-4, 4), "toy.y": Uniform(-BOX, BOX)})
     with pytest.raises(CheckpointMismatchError, match="space"):
         run_nested(failing_likelihood, other, settings, checkpoint, 11, lambda _: None)
+
+
+def test_a_checkpoint_is_checked_against_its_sidecar_before_it_is_read(tmp_path):
+    checkpoint = tmp_path / "sampler.pickle"
+    settings = SamplerSettings(n_live=20, progress_every=1e9, max_iterations=5)
+    run_nested(GaussianLikelihood(), SPACE, settings, checkpoint, 11, lambda _: None)
+    sidecar = tmp_path / "sampler.fingerprint.json"
+    assert json.loads(sidecar.read_text())["seed"] == 11
+    checkpoint.write_bytes(b"\x80\x04 not a pickle")  # e.g. planted or truncated
+    with pytest.raises(CheckpointMismatchError, match="written for a different seed"):
+        run_nested(failing_likelihood, SPACE, settings, checkpoint, 12, lambda _: None)
+    with pytest.raises(CheckpointMismatchError, match=r"sampler\.pickle is unreadable"):
+        run_nested(failing_likelihood, SPACE, settings, checkpoint, 11, lambda _: None)
+    sidecar.unlink()
+    with pytest.raises(CheckpointMismatchError, match=r"no sampler\.fingerprint\.json"):
+        run_nested(failing_likelihood, SPACE, settings, checkpoint, 11, lambda _: None)
 
 
 DYNAMIC = SamplerSettings(

@@ -13,9 +13,11 @@ one phase folder out.
 * ``model.fits`` (:mod:`mgelens.pipeline.products`); SPix1 also writes
   ``adapt_image.fits``, its lensed-source model, which SPix2, LIGHT and MASS use;
 * ``phase.log`` (appended to on every run) and, while sampling, the sampler's checkpoint
-  ``checkpoint-<hash>.pickle``. The hash covers the parameter space, sampler settings,
-  seed, fit settings and input checksums: a rerun with the same inputs resumes, a rerun
-  with changed inputs starts afresh. The checkpoint is deleted once the results are in.
+  ``checkpoint-<hash>.pickle`` (nautilus: ``.h5``) with its JSON sidecar
+  ``checkpoint-<hash>.fingerprint.json``, checked before the checkpoint is read. The hash
+  covers the parameter space, sampler settings, seed, fit settings and input checksums: a
+  rerun with the same inputs resumes, a rerun with changed inputs starts afresh. The
+  checkpoint is deleted once the results are in.
 
 A phase reads only earlier phases' ``result.json`` and ``samples.csv`` (and SPix1's adapt
 image), so any phase can be rerun alone. Every file is written atomically, ``result.json``

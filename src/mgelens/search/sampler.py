@@ -11,11 +11,15 @@
   exists when :func:`run_nested` starts, the sampler is restored from it (RNG state
   included) and continues, so an interrupted run finishes with the same samples and log
   evidence as an uninterrupted one. The checkpoint carries a fingerprint of the parameter
-  space, the settings and the seed; a mismatch raises :class:`CheckpointMismatchError`
-  instead of silently continuing a different fit. The checkpoint is **kept** after a
+  space, the settings and the seed, and so does its JSON sidecar
+  ``<stem>.fingerprint.json``, which is checked *before* the checkpoint is unpickled
+  (unpickling can run code): a mismatch, or a checkpoint without its sidecar, raises
+  :class:`CheckpointMismatchError` instead of loading a foreign file or silently
+  continuing a different fit. The checkpoint is **kept** after a
   successful run: calling :func:`run_nested` again returns the stored run without sampling.
   Callers delete it once their result files are written if they want the space back.
-  Nautilus checkpoints to ``<checkpoint stem>.h5`` when ``h5py`` is importable.
+  Nautilus checkpoints to ``<checkpoint stem>.h5`` (HDF5, no code) when ``h5py`` is
+  importable, with the same sidecar.
 * **Quiet progress**: no progress bar; one line every ``progress_every`` seconds through
   ``log`` (default: the ``mgelens.search`` logger at INFO level).
 * **Parallel likelihoods**: ``n_processes > 1`` runs a ``multiprocessing`` pool ("spawn"
@@ -517,6 +521,29 @@ def _fingerprint(space: ParameterSpace, settings: SamplerSettings, seed: int) ->
     return json.loads(json.dumps(content))
 
 
+def fingerprint_path(checkpoint: Path) -> Path:
+    """The JSON sidecar of a checkpoint file: ``<stem>.fingerprint.json``."""
+    return checkpoint.with_suffix(".fingerprint.json")
+
+
+def _check_sidecar(checkpoint: Path, expected: dict) -> None:
+    """Compare a checkpoint's JSON sidecar with ``expected`` before the checkpoint itself
+    is read (a pickle can run code when loaded, so a foreign one is never unpickled)."""
+    sidecar = fingerprint_path(checkpoint)
+    if not sidecar.is_file():
+        raise CheckpointMismatchError(
+            f"checkpoint {checkpoint} has no {sidecar.name} to check it against these "
+            "settings; delete it to start afresh"
+        )
+    try:
+        stored = json.loads(sidecar.read_text())
+    except (OSError, ValueError) as error:
+        raise CheckpointMismatchError(
+            f"{sidecar}: unreadable ({error}); delete it and {checkpoint.name} to start afresh"
+        ) from error
+    _check_fingerprint(checkpoint, stored, expected)
+
+
 def _check_fingerprint(path: Path, stored: dict, expected: dict) -> None:
     if stored != expected:
         differing = sorted(k for k in expected if stored.get(k) != expected.get(k))
@@ -660,6 +687,16 @@ def _run_dynesty_quietly(sampler, settings: SamplerSettings, common: dict) -> No
         sampler.run_nested(dlogz=settings.dlogz, **common)
 
 
+def _restore_dynesty(path: Path, pool):
+    """The dynesty sampler of a checkpoint whose sidecar matched."""
+    try:
+        return dynesty.utils.restore_sampler(str(path), pool=pool)
+    except (OSError, EOFError, RuntimeError) as error:  # dynesty: RuntimeError if corrupt
+        raise CheckpointMismatchError(
+            f"checkpoint {path} is unreadable ({error}); delete it to start afresh"
+        ) from error
+
+
 def _save_dynesty(sampler, path: Path) -> None:
     with atomic_path(path) as temporary:
         dynesty.utils.save_sampler(sampler, str(temporary))
@@ -674,11 +711,15 @@ def _sample_dynesty(
 ) -> SamplerOutput:
     space = evaluation.space
     fingerprint = _fingerprint(space, settings, seed)
+    resume = checkpoint_path is not None and checkpoint_path.exists()
+    if resume:
+        _check_sidecar(checkpoint_path, fingerprint)
+    elif checkpoint_path is not None:
+        write_json(fingerprint_path(checkpoint_path), fingerprint)
     with _evaluating(evaluation, settings.n_processes) as pool:
         stored = {"n_calls": 0, "n_rejected": 0, "runtime": 0.0, "n_resumes": -1}
-        resume = checkpoint_path is not None and checkpoint_path.exists()
         if resume:
-            sampler = dynesty.utils.restore_sampler(str(checkpoint_path), pool=pool)
+            sampler = _restore_dynesty(checkpoint_path, pool)
             stored = getattr(sampler, _STATE_ATTRIBUTE, None)
             if stored is None:
                 raise CheckpointMismatchError(
@@ -776,16 +817,10 @@ def _sample_nautilus(
     space = evaluation.space
     filepath = _nautilus_checkpoint(checkpoint_path, log)
     if filepath is not None:
-        fingerprint_path = filepath.with_suffix(".fingerprint.json")
         fingerprint = _fingerprint(space, settings, seed)
         if filepath.exists():
-            if not fingerprint_path.exists():
-                raise CheckpointMismatchError(
-                    f"checkpoint {filepath} has no {fingerprint_path.name} to check it against "
-                    "these settings; delete it to start afresh"
-                )
-            _check_fingerprint(filepath, json.loads(fingerprint_path.read_text()), fingerprint)
-        write_json(fingerprint_path, fingerprint)
+            _check_sidecar(filepath, fingerprint)
+        write_json(fingerprint_path(filepath), fingerprint)
     started = time.perf_counter()
     with _evaluating(evaluation, settings.n_processes) as pool:
         sampler = nautilus.Sampler(
