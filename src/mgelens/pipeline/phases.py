@@ -37,6 +37,7 @@ SPix1 and SPix2, 3 Sérsics in LIGHT, Sérsics and EPL + shear together in MASS.
 
 import contextlib
 import dataclasses
+import functools
 import hashlib
 import importlib.util
 import json
@@ -63,7 +64,7 @@ from mgelens.grid import pixel_centres
 from mgelens.imaging import INFO_FILE, MASK_FILE, Imaging
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
-from mgelens.pipeline import models, products
+from mgelens.pipeline import fittable, models, products
 from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
 from mgelens.provenance import code_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -211,13 +212,21 @@ def load_dataset(
     """Imaging of ``lens_dir`` in the circular mask of the settings, and the mask radius.
 
     A ``mask.fits`` in the folder is combined with the circle (a pixel is used only if
-    both use it). ``light_centre`` (arcsec) is where light profiles are over-sampled.
+    both use it); only the pixels used must hold finite data and a positive noise.
+    ``light_centre`` (arcsec) is where light profiles are over-sampled.
+
+    Raises
+    ------
+    ImagingError
+        Naming ``data.fits``, for a circle reaching beyond the image or data without
+        light inside it (:mod:`mgelens.pipeline.fittable`), and for unreadable or invalid
+        files (:class:`~mgelens.imaging.Imaging`).
     """
-    imaging = Imaging.from_folder(lens_dir)
     radius = resolve_mask_radius(lens_dir, settings)
-    mask = mask_module.circular(imaging.shape, imaging.pixel_scale, radius, settings.mask_centre)
-    if imaging.mask is not None:
-        mask = mask | imaging.mask
+    circle = functools.partial(_fit_circle, lens_dir / "data.fits", radius, settings.mask_centre)
+    imaging = Imaging.from_folder(lens_dir, mask_from=circle)
+    mask = imaging.mask
+    fittable.check_signal(lens_dir / "data.fits", imaging, mask, radius)
     fit_settings = FitSettings(
         positive_only=settings.positive_only,
         sub_size=settings.sub_size,
@@ -230,6 +239,19 @@ def load_dataset(
         psf_trim=settings.psf_trim,
     )
     return FitDataset.from_imaging(imaging, mask, fit_settings, light_centre), radius
+
+
+def _fit_circle(
+    data_file: Path,
+    radius: float,
+    centre: tuple[float, float],
+    shape: tuple[int, int],
+    pixel_scale: float,
+) -> np.ndarray:
+    """The fit's circular mask on an image of ``shape`` (True = excluded), refused if it
+    reaches beyond the image."""
+    fittable.check_circle_inside(data_file, shape, pixel_scale, radius, centre)
+    return mask_module.circular(shape, pixel_scale, radius, centre)
 
 
 def _imaging_files(lens_dir: Path) -> list[Path]:
@@ -860,6 +882,14 @@ def run_phase(
     with _phase_log(folder):
         runs = chain_settings(name, settings)
         problems = [PROBLEMS[name](lens_dir, results_dir, s) for s in runs]
+        first = problems[0]
+        fittable.check_pixels_per_parameter(
+            lens_dir / "data.fits",
+            first.dataset.imaging,
+            first.dataset.mask,
+            first.mask_radius,
+            first.space.n_free,
+        )
         return _solve(problems, folder, settings, seed, lens_dir)
 
 
