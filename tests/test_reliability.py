@@ -102,3 +102,17 @@ def test_a_psf_with_a_shallow_negative_dip_is_accepted():
     psf = arrays["psf"].copy()
     psf[0, 0] = -0.04 * psf.max()
     assert Imaging(arrays["data"], arrays["noise_map"], psf, PIXEL).psf.sum() == pytest.approx(1)
+
+
+@pytest.mark.parametrize(
+    ("slam", "message"),
+    [
+        ('{"sub_size": "2"}', "--slam: slam.sub_size must be an integer >= 1, got '2'"),
+        ('{"mask_centre": [1]}', "--slam: slam.mask_centre must be two numbers"),
+        ('{"samplers": {"sp": {"n_live": "many"}}}', "slam.samplers.sp.n_live must be"),
+    ],
+)
+def test_phase_slam_values_are_checked_like_the_config(lens, tmp_path, caplog, slam, message):
+    results = tmp_path / "results"
+    code = phase_sp(lens, results, "--mask-radius", str(RADIUS), "--slam", slam)
+    assert_refused(code, caplog, results, message)

@@ -165,7 +165,7 @@ def test_max_iterations_caps_the_run_with_a_warning(fast_run):
     assert fast_run.statistics()["converged"] is True
     with pytest.raises(ValueError, match="dynesty samplers only"):
         SamplerSettings(method="nautilus", max_iterations=10)
-    with pytest.raises(ValueError, match="max_iterations must be >= 1"):
+    with pytest.raises(ValueError, match="max_iterations must be an integer >= 1"):
         SamplerSettings(max_iterations=0)
 
 
@@ -190,7 +190,7 @@ def test_max_calls_caps_the_run_with_a_warning(settings):
     assert not output.converged
     assert "stopped at max_calls = 300" in output.stop_reason
     assert output.statistics()["converged"] is False
-    with pytest.raises(ValueError, match="max_calls must be >= 1"):
+    with pytest.raises(ValueError, match="max_calls must be an integer >= 1"):
         SamplerSettings(method=settings.method, max_calls=0)
 
 

@@ -53,6 +53,7 @@ import dynesty.utils
 import numpy as np
 from scipy import special
 
+from mgelens import values
 from mgelens.atomic import atomic_path, write_json
 from mgelens.memory import keep_freed_memory
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -147,21 +148,21 @@ discard_exploration
     queue_size: int | None = None
 
     def __post_init__(self):
-        if self.method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        if self.n_live < 2:
-            raise ValueError(f"n_live must be at least 2, got {self.n_live}")
-        if self.n_processes < 1:
-            raise ValueError(f"n_processes must be at least 1, got {self.n_processes}")
-        if self.max_iterations is not None:
-            if self.method == "nautilus":
-                raise ValueError("max_iterations applies to the dynesty samplers only")
-            if self.max_iterations < 1:
-                raise ValueError(f"max_iterations must be >= 1, got {self.max_iterations}")
-        if self.max_calls is not None and self.max_calls < 1:
-            raise ValueError(f"max_calls must be >= 1, got {self.max_calls}")
-        if self.checkpoint_every < 0 or self.progress_every < 0:
-            raise ValueError("checkpoint_every and progress_every must be >= 0 seconds")
+        """Check every field's type and range; a ValueError starts with the field's name."""
+        values.choice("method", self.method, METHODS)
+        values.choice("bound", self.bound, BOUNDS)
+        values.choice("sample", self.sample, SAMPLE_METHODS)
+        for name, minimum in _INTEGER_FIELDS.items():
+            value = getattr(self, name)
+            if not (value is None and name in _OPTIONAL_FIELDS):
+                values.integer(name, value, minimum)
+        for name, limits in _NUMBER_FIELDS.items():
+            value = getattr(self, name)
+            if not (value is None and name in _OPTIONAL_FIELDS):
+                values.number(name, value, **limits)
+        values.boolean("discard_exploration", self.discard_exploration)
+        if self.max_iterations is not None and self.method == "nautilus":
+            raise ValueError("max_iterations applies to the dynesty samplers only")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -169,15 +170,50 @@ discard_exploration
     @classmethod
     def from_dict(cls, content: dict) -> "SamplerSettings":
         known = {f.name for f in fields(cls)}
-        unknown = set(content) - known
+        unknown = sorted(set(content) - known)
         if unknown:
-            raise ValueError(f"unknown sampler settings {sorted(unknown)}; known: {sorted(known)}")
+            raise ValueError(
+                f"{unknown[0]}: unknown sampler settings {unknown}; known: {sorted(known)}"
+            )
         return cls(**content)
 
     def result_settings(self) -> dict:
         """The settings that determine the result (all but the execution fields)."""
         execution = ("checkpoint_every", "progress_every", "n_processes")
         return {k: v for k, v in self.to_dict().items() if k not in execution}
+
+
+BOUNDS = ("none", "single", "multi", "balls", "cubes")
+"""dynesty's bounding methods."""
+SAMPLE_METHODS = ("auto", "unif", "rwalk", "slice", "rslice")
+"""dynesty's sampling methods ("auto": :func:`resolve_sample_method`)."""
+_INTEGER_FIELDS = {
+    "n_live": 2,
+    "walks": 1,
+    "slices": 1,
+    "n_effective": 1,
+    "max_iterations": 1,
+    "max_calls": 1,
+    "n_networks": 1,
+    "n_batch": 1,
+    "n_shell": 1,
+    "n_processes": 1,
+    "queue_size": 1,
+}
+"""Integer settings and their minimum."""
+_NUMBER_FIELDS = {
+    "dlogz": {"minimum": 0.0, "open_minimum": True},
+    "facc": {"minimum": 0.0, "maximum": 1.0, "open_minimum": True},
+    "enlarge_per_dim": {"minimum": 1.0},
+    "split_threshold": {"minimum": 0.0, "open_minimum": True},
+    "f_live": {"minimum": 0.0, "maximum": 1.0, "open_minimum": True},
+    "n_eff": {"minimum": 0.0},
+    "checkpoint_every": {"minimum": 0.0},
+    "progress_every": {"minimum": 0.0},
+}
+"""Real-valued settings and their range (:func:`mgelens.values.number`)."""
+_OPTIONAL_FIELDS = ("dlogz", "n_effective", "max_iterations", "max_calls", "queue_size")
+"""Settings that may be ``None`` (dynesty's default, or no cap)."""
 
 
 SIGMA_PROBABILITY = {1: math.erf(1.0 / math.sqrt(2.0)), 3: math.erf(3.0 / math.sqrt(2.0))}
