@@ -116,3 +116,27 @@ def test_phase_slam_values_are_checked_like_the_config(lens, tmp_path, caplog, s
     results = tmp_path / "results"
     code = phase_sp(lens, results, "--mask-radius", str(RADIUS), "--slam", slam)
     assert_refused(code, caplog, results, message)
+
+
+def test_phase_results_under_a_file_are_named(lens, tmp_path, caplog):
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    code = phase_sp(lens, afile / "sub", "--mask-radius", str(RADIUS))
+    message = f"phase sp: cannot write {afile / 'sub' / 'sp' / 'result.json'}: "
+    assert_refused(code, caplog, tmp_path, message, "Not a directory")
+
+
+def test_isophotes_output_under_a_file_is_named(lens, tmp_path, caplog):
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    out = afile / "x.csv"
+    code = main(["isophotes", str(lens / "data.fits"), "--out", str(out)])
+    assert_refused(code, caplog, tmp_path, f"cannot write {out}: {afile}: File exists")
+
+
+@pytest.mark.parametrize("scale", ["-1", "0", "nan"])
+def test_isophotes_refuse_a_non_positive_pixel_scale(lens, tmp_path, caplog, scale):
+    out = tmp_path / "x.csv"
+    code = main(["isophotes", str(lens / "data.fits"), "--pixel-scale", scale, "--out", str(out)])
+    assert_refused(code, caplog, tmp_path, "--pixel-scale (arcsec/pixel) must be finite and > 0")
+    assert not out.exists()
