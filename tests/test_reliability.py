@@ -10,6 +10,7 @@ from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging, ImagingError
 from mgelens.pipeline import phases
 from mgelens.pipeline.settings import settings_from_mapping
+from mgelens.sheet import SheetError, read_sample_sheet
 
 PIXEL = 0.1
 SIZE = 41  # 4.1″ across: the largest circle about the centre has radius 2.05″
@@ -140,3 +141,38 @@ def test_isophotes_refuse_a_non_positive_pixel_scale(lens, tmp_path, caplog, sca
     code = main(["isophotes", str(lens / "data.fits"), "--pixel-scale", scale, "--out", str(out)])
     assert_refused(code, caplog, tmp_path, "--pixel-scale (arcsec/pixel) must be finite and > 0")
     assert not out.exists()
+
+
+# -- sample sheets (mgelens.sheet; the workflow's snakemake -n cases: tests/test_workflow.py)
+HEADER = "lens\tkind\tmock\tinput\tmask_radius\tmge_sets\tpoint_set\tz_lens\tz_source\n"
+M1_ROW = "M1\tmock\tM1\t\t1.8\t4\tyes\t0.28\t0.98\n"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("", "is empty: it needs a tab-separated header line"),
+        ("# only a comment\n\n", "is empty: it needs a tab-separated header line"),
+        (HEADER, "lists no lens: add one tab-separated row per lens"),
+        (HEADER + M1_ROW + "M2\tmock\tM2\t\t1.6\t4\tyes\t0.35\t1.1\t7\n", ", line 3: 10 cells but"),
+        (HEADER + M1_ROW + M1_ROW, "lens ids must be unique, repeated: ['M1']"),
+    ],
+    ids=["zero_bytes", "comments_only", "header_only", "extra_cell", "repeated_id"],
+)
+def test_bad_sample_sheets_are_named(tmp_path, text, message):
+    path = tmp_path / "sheet.tsv"
+    path.write_text(text)
+    with pytest.raises(SheetError) as error:
+        read_sample_sheet(path)
+    assert str(path) in str(error.value)
+    assert message in str(error.value)
+
+
+def test_sample_sheet_ids_are_read_as_written(tmp_path):
+    path = tmp_path / "sheet.tsv"
+    rows = [M1_ROW.replace("M1\tmock", f"{lens}\tmock", 1) for lens in ("nan", "NA", "007")]
+    path.write_text(HEADER + "".join(rows) + "# a comment\n")
+    sheet = read_sample_sheet(path)
+    assert list(sheet.index) == ["nan", "NA", "007"]
+    assert sheet["input"].isna().all()  # empty cells stay missing
+    assert sheet["mask_radius"].tolist() == [1.8] * 3

@@ -207,6 +207,22 @@ def test_comma_separated_sheet_is_named_with_the_fix(tmp_path):
     assert "tab-separated" in output
 
 
+def test_a_header_only_sheet_stops_the_dry_run(tmp_path):
+    (tmp_path / "sheet.tsv").write_text(SHEET_HEADER)
+    (tmp_path / "config.yaml").write_text(f"samples: {tmp_path / 'sheet.tsv'}\n")
+    result = snakemake("-n", "--configfile", str(tmp_path / "config.yaml"), workdir=tmp_path)
+    assert result.returncode != 0
+    assert f"sample sheet {tmp_path / 'sheet.tsv'} lists no lens" in result.stdout + result.stderr
+
+
+def test_a_target_of_a_lens_not_in_the_sheet_names_the_sheet_and_its_lenses(tmp_path):
+    result = snakemake("-n", "results/X9/mass/result.json", workdir=tmp_path)
+    assert result.returncode != 0
+    sheet = ROOT / "config" / "lenses.tsv"
+    message = f"lens 'X9' is not in the sample sheet {sheet}, whose lenses are M1, M2, M3"
+    assert message in result.stdout + result.stderr
+
+
 def test_one_phases_sampler_settings_reach_that_phase_only(tmp_path):
     (tmp_path / "config.yaml").write_text("slam:\n  samplers:\n    mass: {n_live: 80}\n")
     result = snakemake(
