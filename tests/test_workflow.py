@@ -179,7 +179,6 @@ SHEET_HEADER = "lens\tkind\tmock\tinput\tmask_radius\tmge_sets\tpoint_set\tz_len
         ("samples: missing.tsv\n", None, "missing.tsv not found"),
         ("slam:\n  source_pixel: 500\n", None, "config: unknown key slam.source_pixel"),
         ("slam:\n  samplers: {mass: {n_live: 1}}\n", None, "slam.samplers.mass.n_live must be"),
-        ("slam:\n  sub_size: '2'\n", None, "slam.sub_size must be an integer >= 1, got '2'"),
         ("data_dir: /nowhere\n", "R1\treal\t\tslacsX\t3.0\t2\tno\t0.2\t0.6\n",
          "real lens 'R1': data.fits, noise_map.fits, psf.fits not found in /nowhere/slacsX"),
         ("slam:\n  mge_sets: 6\n", None,

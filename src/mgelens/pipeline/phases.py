@@ -61,7 +61,7 @@ from mgelens.fit import (
 )
 from mgelens.geometry import axis_ratio_and_angle_from
 from mgelens.grid import pixel_centres
-from mgelens.imaging import INFO_FILE, MASK_FILE, Imaging
+from mgelens.imaging import DATA_FILE, INFO_FILE, MASK_FILE, Imaging
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
 from mgelens.pipeline import fittable, models, products
@@ -223,10 +223,11 @@ def load_dataset(
         files (:class:`~mgelens.imaging.Imaging`).
     """
     radius = resolve_mask_radius(lens_dir, settings)
-    circle = functools.partial(_fit_circle, lens_dir / "data.fits", radius, settings.mask_centre)
+    data_file = lens_dir / DATA_FILE
+    circle = functools.partial(_fit_circle, data_file, radius, settings.mask_centre)
     imaging = Imaging.from_folder(lens_dir, mask_from=circle)
     mask = imaging.mask
-    fittable.check_signal(lens_dir / "data.fits", imaging, mask, radius)
+    fittable.check_signal(data_file, imaging, mask, radius)
     fit_settings = FitSettings(
         positive_only=settings.positive_only,
         sub_size=settings.sub_size,
@@ -884,7 +885,7 @@ def run_phase(
         problems = [PROBLEMS[name](lens_dir, results_dir, s) for s in runs]
         first = problems[0]
         fittable.check_pixels_per_parameter(
-            lens_dir / "data.fits",
+            lens_dir / DATA_FILE,
             first.dataset.imaging,
             first.dataset.mask,
             first.mask_radius,
