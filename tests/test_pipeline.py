@@ -422,6 +422,25 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"mass_meshes": 0}, "mass_meshes must be an integer >= 1, got 0"),
         ({"mass_meshes": 1.5}, "mass_meshes must be an integer >= 1"),
         ({"mass_meshes": True}, "mass_meshes must be an integer >= 1"),
+        # issue 33: every value is checked where its key is, named by its dotted path
+        ({"sub_size": "2"}, r"slam\.sub_size must be an integer >= 1, got '2'"),
+        ({"sub_size": 0}, r"slam\.sub_size must be an integer >= 1, got 0"),
+        ({"mask_centre": [1]}, r"slam\.mask_centre must be two numbers \(x, y\) in arcsec"),
+        ({"kmeans_seed": "x"}, r"slam\.kmeans_seed must be an integer >= 0, got 'x'"),
+        ({"positions_factor": "big"}, r"slam\.positions_factor must be a number > 0, got 'big'"),
+        ({"lp_centre_radius": -1}, r"slam\.lp_centre_radius must be a number >= 0, got -1"),
+        ({"source_pixels": "many"}, r"slam\.source_pixels must be an integer >= 3, got 'many'"),
+        ({"overlay_shape": [24]}, r"slam\.overlay_shape must be two integers >= 2"),
+        ({"psf_trim": 1}, r"slam\.psf_trim must be a number in \[0, 1\), got 1"),
+        ({"mask_radius": "3"}, r"slam\.mask_radius must be a number > 0, got '3'"),
+        ({"mge_sets": "4"}, r"slam\.mge_sets must be an integer >= 1, got '4'"),
+        ({"allow_unconverged": "yes"}, r"slam\.allow_unconverged must be true or false"),
+        ({"profile": 3}, r"slam\.profile must be one of \['paper', 'quick'\], got 3"),
+        ({"samplers": 3}, r"slam\.samplers must be a mapping"),
+        ({"samplers": {"sp": 5}}, r"slam\.samplers\.sp must be a mapping"),
+        ({"samplers": {"sp": {"n_live": "many"}}}, r"slam\.samplers\.sp\.n_live must be an"),
+        ({"samplers": {"mass": {"f_live": 0}}}, r"slam\.samplers\.mass\.f_live must be a number"),
+        ({"samplers": {"sp": {"bound": "box"}}}, r"slam\.samplers\.sp\.bound must be one of"),
     ],
 )
 def test_invalid_settings_name_the_key(section, message):
@@ -541,6 +560,8 @@ def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):
     assert "phase sp" in (folder / "phase.log").read_text()
     positions = summary["max_likelihood_fit"]["positions"]
     assert positions["threshold"] >= 0.2
+    assert summary["converged"] is True
+    assert summary["stop_reason"].startswith("remaining Δln Z = ")
 
 
 @pytest.mark.parametrize(
@@ -693,6 +714,7 @@ def sersic_settings(**changes):
             "positive_only": False,
             "source_pixels": 60,
             "overlay_shape": [8, 8],
+            "allow_unconverged": True,
             "samplers": {
                 p: {**capped, "method": "dynesty_static", "max_iterations": n}
                 for p, n in iterations.items()
@@ -704,7 +726,8 @@ def sersic_settings(**changes):
 
 @pytest.fixture(scope="module")
 def sersic_run(mock_dir, tmp_path_factory):
-    """The five phases with ``lens_light_model: sersic`` and capped samplers (plumbing)."""
+    """The five phases with ``lens_light_model: sersic`` and capped samplers (plumbing:
+    each phase builds on unconverged earlier ones)."""
     results = tmp_path_factory.mktemp("sersic")
     settings = sersic_settings()
     for phase in PHASES:
@@ -715,6 +738,25 @@ def sersic_run(mock_dir, tmp_path_factory):
 def _components(folder):
     record = json.loads((folder / "result.json").read_text())["max_likelihood_fit"]
     return record["lens_light"]["components"]
+
+
+def test_capped_phases_record_that_they_did_not_converge(sersic_run):
+    """The Sérsic chain's samplers are capped: each result says so, with a WARNING."""
+    for phase in PHASES:
+        summary = json.loads((sersic_run / phase / "result.json").read_text())
+        assert summary["converged"] is False
+        assert "stopped at max_iterations" in summary["stop_reason"]  # MASS: per mesh
+        assert "WARNING mgelens.pipeline: phase" in (sersic_run / phase / "phase.log").read_text()
+
+
+def test_a_phase_refuses_an_unconverged_earlier_phase(sersic_run, mock_dir, tmp_path):
+    shutil.copytree(sersic_run / "sp", tmp_path / "sp")
+    settings = sersic_settings(allow_unconverged=False)
+    message = r"sp/result\.json is not converged \(stopped at max_iterations = 60.*allow_unconv"
+    with pytest.raises(phases.PhaseInputError, match=message):
+        phases.run_phase("spix1", mock_dir, tmp_path, settings)
+    assert not (tmp_path / "spix1" / "result.json").exists()
+    assert phases.read_phase(tmp_path, "sp", allow_unconverged=True).result.phase == "sp"
 
 
 def test_sersic_chain_fixes_sps_sersics_in_the_spix_phases(sersic_run, mock_dir):

@@ -1,5 +1,6 @@
 """Nested sampling: evidence and posterior of a known Gaussian, rejections, resume, backends."""
 
+import json
 import math
 import platform
 import resource
@@ -157,9 +158,14 @@ def test_max_iterations_caps_the_run_with_a_warning(fast_run):
     assert len(output.samples) in (150, 151)
     assert len(fast_run.samples) > 500
     assert any("WARNING stopped at max_iterations = 50" in line for line in lines)
+    assert not output.converged
+    assert output.stop_reason.startswith("stopped at max_iterations = 50 with remaining Δln Z")
+    assert fast_run.converged
+    assert fast_run.stop_reason.startswith("remaining Δln Z = ")
+    assert fast_run.statistics()["converged"] is True
     with pytest.raises(ValueError, match="dynesty samplers only"):
         SamplerSettings(method="nautilus", max_iterations=10)
-    with pytest.raises(ValueError, match="max_iterations must be >= 1"):
+    with pytest.raises(ValueError, match="max_iterations must be an integer >= 1"):
         SamplerSettings(max_iterations=0)
 
 
@@ -181,7 +187,10 @@ def test_max_calls_caps_the_run_with_a_warning(settings):
     # counted against it), nautilus after the batch (100 calls) that reaches it
     assert 300 <= output.n_calls == likelihood.calls <= 300 + 2 * 100
     assert any("WARNING stopped at max_calls = 300" in line for line in lines)
-    with pytest.raises(ValueError, match="max_calls must be >= 1"):
+    assert not output.converged
+    assert "stopped at max_calls = 300" in output.stop_reason
+    assert output.statistics()["converged"] is False
+    with pytest.raises(ValueError, match="max_calls must be an integer >= 1"):
         SamplerSettings(method=settings.method, max_calls=0)
 
 
@@ -279,6 +288,22 @@ def test_resume_reproduces_the_uninterrupted_run(tmp_path, fast_run):
     other = ParameterSpace.from_priors({"toy.x": Uniform(-4, 4), "toy.y": Uniform(-BOX, BOX)})
     with pytest.raises(CheckpointMismatchError, match="space"):
         run_nested(failing_likelihood, other, settings, checkpoint, 11, lambda _: None)
+
+
+def test_a_checkpoint_is_checked_against_its_sidecar_before_it_is_read(tmp_path):
+    checkpoint = tmp_path / "sampler.pickle"
+    settings = SamplerSettings(n_live=20, progress_every=1e9, max_iterations=5)
+    run_nested(GaussianLikelihood(), SPACE, settings, checkpoint, 11, lambda _: None)
+    sidecar = tmp_path / "sampler.fingerprint.json"
+    assert json.loads(sidecar.read_text())["seed"] == 11
+    checkpoint.write_bytes(b"\x80\x04 not a pickle")  # e.g. planted or truncated
+    with pytest.raises(CheckpointMismatchError, match="written for a different seed"):
+        run_nested(failing_likelihood, SPACE, settings, checkpoint, 12, lambda _: None)
+    with pytest.raises(CheckpointMismatchError, match=r"sampler\.pickle is unreadable"):
+        run_nested(failing_likelihood, SPACE, settings, checkpoint, 11, lambda _: None)
+    sidecar.unlink()
+    with pytest.raises(CheckpointMismatchError, match=r"no sampler\.fingerprint\.json"):
+        run_nested(failing_likelihood, SPACE, settings, checkpoint, 11, lambda _: None)
 
 
 DYNAMIC = SamplerSettings(
@@ -427,3 +452,7 @@ def test_pooling_checks_its_runs():
     other = SamplerOutput(**{**run.__dict__, "names": ("y",)})
     with pytest.raises(ValueError, match="different parameters"):
         pool_runs([run, other])
+    capped = SamplerOutput(**{**run.__dict__, "converged": False, "stop_reason": "capped"})
+    pooled = pool_runs([run, capped])
+    assert not pooled.converged
+    assert "run 2: capped" in pooled.stop_reason

@@ -178,7 +178,7 @@ SHEET_HEADER = "lens\tkind\tmock\tinput\tmask_radius\tmge_sets\tpoint_set\tz_len
         ("sampler_seed: -1\n", None, "sampler_seed"),
         ("samples: missing.tsv\n", None, "missing.tsv not found"),
         ("slam:\n  source_pixel: 500\n", None, "config: unknown key slam.source_pixel"),
-        ("slam:\n  samplers: {mass: {n_live: 1}}\n", None, "slam.samplers.mass: n_live"),
+        ("slam:\n  samplers: {mass: {n_live: 1}}\n", None, "slam.samplers.mass.n_live must be"),
         ("data_dir: /nowhere\n", "R1\treal\t\tslacsX\t3.0\t2\tno\t0.2\t0.6\n",
          "real lens 'R1': data.fits, noise_map.fits, psf.fits not found in /nowhere/slacsX"),
         ("slam:\n  mge_sets: 6\n", None,
@@ -204,6 +204,22 @@ def test_comma_separated_sheet_is_named_with_the_fix(tmp_path):
     output = result.stdout + result.stderr
     assert f"sample sheet {tmp_path / 'sheet.csv'} has no `lens` column" in output
     assert "tab-separated" in output
+
+
+def test_a_header_only_sheet_stops_the_dry_run(tmp_path):
+    (tmp_path / "sheet.tsv").write_text(SHEET_HEADER)
+    (tmp_path / "config.yaml").write_text(f"samples: {tmp_path / 'sheet.tsv'}\n")
+    result = snakemake("-n", "--configfile", str(tmp_path / "config.yaml"), workdir=tmp_path)
+    assert result.returncode != 0
+    assert f"sample sheet {tmp_path / 'sheet.tsv'} lists no lens" in result.stdout + result.stderr
+
+
+def test_a_target_of_a_lens_not_in_the_sheet_names_the_sheet_and_its_lenses(tmp_path):
+    result = snakemake("-n", "results/X9/mass/result.json", workdir=tmp_path)
+    assert result.returncode != 0
+    sheet = ROOT / "config" / "lenses.tsv"
+    message = f"lens 'X9' is not in the sample sheet {sheet}, whose lenses are M1, M2, M3"
+    assert message in result.stdout + result.stderr
 
 
 def test_one_phases_sampler_settings_reach_that_phase_only(tmp_path):
@@ -367,6 +383,7 @@ mock:
   sub_size: 4
 slam:
   profile: quick
+  allow_unconverged: true
   source_pixels: 120
   overlay_shape: [12, 12]
   samplers:
@@ -377,7 +394,7 @@ slam:
     mass: {{max_calls: 250}}
 """
 """A one-lens sample with every sampler capped (MASS is the quick profile's nautilus): the
-DAG's plumbing, not a lens model."""
+DAG's plumbing, not a lens model, so each phase builds on unconverged earlier phases."""
 
 
 @pytest.mark.slow

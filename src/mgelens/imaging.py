@@ -21,6 +21,7 @@ import json
 import logging
 import os
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,6 +45,11 @@ PSF_SUM_TOLERANCE = 1e-6
 """A PSF whose sum differs from 1 by more than this is renormalised."""
 PIXEL_SCALE_RTOL = 1e-6
 """Relative difference above which an explicit and a header pixel scale disagree."""
+PSF_NEGATIVE_FRACTION = 0.05
+"""Largest depth of a PSF's negative entries, as a fraction of its peak, that is accepted
+(a PSF is a non-negative kernel; background-subtracted empirical PSFs dip slightly below
+zero in their noise). The SLACS PSFs have no negative entry and the mocks' Gaussians
+none; a PSF beyond this is a wrong file, HDU or sign."""
 
 
 class ImagingError(ValueError):
@@ -75,8 +81,9 @@ class Imaging:
     noise_map : ndarray (n_y, n_x)
         1-sigma noise in the unit of ``data``; finite and > 0 at every unmasked pixel.
     psf : ndarray (k_y, k_x)
-        Odd-sized, finite kernel with positive sum. A sum differing from 1 by more than
-        1e-6 is normalised to unit sum (logged at INFO level).
+        Odd-sized, finite kernel with positive sum, whose negative entries (if any) are
+        shallower than :data:`PSF_NEGATIVE_FRACTION` of its peak. A sum differing from 1
+        by more than 1e-6 is normalised to unit sum (logged at INFO level).
     pixel_scale : float
         Pixel size in arcsec/pixel, > 0.
     mask : ndarray of bool (n_y, n_x) or None
@@ -89,9 +96,10 @@ class Imaging:
     Raises
     ------
     ImagingError
-        For non-2D or non-numeric arrays, mismatched shapes, an even-sized, non-finite or
-        non-positive PSF, a bad pixel scale or mask, NaN/inf in data or noise at unmasked
-        pixels, or noise <= 0 at unmasked pixels.
+        For non-2D or non-numeric arrays, mismatched shapes, an even-sized, non-finite,
+        non-positive or too negative PSF, a bad pixel scale or mask, NaN/inf in data or
+        noise at unmasked pixels, or noise <= 0 at unmasked pixels. Masked pixels may hold
+        any value.
     """
 
     data: np.ndarray
@@ -179,6 +187,7 @@ class Imaging:
         hdu: int = 0,
         name: str = "",
         mask_path: str | os.PathLike | None = None,
+        mask_from: Callable[[tuple[int, int], float], np.ndarray] | None = None,
     ) -> "Imaging":
         """Read an imaging data set from FITS files.
 
@@ -195,6 +204,10 @@ class Imaging:
             Label of the data set.
         mask_path : path, optional
             FITS mask, nonzero = excluded (see :func:`read_fits_mask`).
+        mask_from : callable, optional
+            ``mask_from(shape, pixel_scale)`` -> bool mask (True = excluded), combined with
+            the mask file: e.g. a fit's circle, so that only the pixels the fit uses must
+            hold finite data and a positive noise.
 
         Raises
         ------
@@ -214,6 +227,12 @@ class Imaging:
         mask = None if paths["mask"] is None else read_fits_mask(paths["mask"])
         header_scale = _header_pixel_scale(header, paths["data"])
         scale = _resolve_pixel_scale(pixel_scale, header_scale, paths["data"])
+        if mask_from is not None:
+            region = mask_from(np.shape(data), scale)
+            if mask is None:
+                mask = region
+            elif np.shape(mask) == np.shape(region):  # else the check names the mask file
+                mask = mask | region
         unit = str(header.get("BUNIT", "")).strip()
         try:
             return cls(data, noise_map, psf, scale, mask=mask, name=name, unit=unit)
@@ -230,6 +249,7 @@ class Imaging:
         pixel_scale: float | None = None,
         hdu: int = 0,
         name: str | None = None,
+        mask_from: Callable[[tuple[int, int], float], np.ndarray] | None = None,
     ) -> "Imaging":
         """Read ``data.fits``, ``noise_map.fits``, ``psf.fits`` (and ``mask.fits``) of a folder.
 
@@ -246,6 +266,8 @@ class Imaging:
             HDU holding the images (see :meth:`from_fits`).
         name : str, optional
             Label; defaults to the folder name.
+        mask_from : callable, optional
+            Extra mask from the shape and pixel scale (see :meth:`from_fits`).
         """
         folder = Path(folder)
         if not folder.is_dir():
@@ -264,6 +286,7 @@ class Imaging:
             hdu=hdu,
             name=folder.resolve().name if name is None else name,
             mask_path=mask_path if mask_path.is_file() else None,
+            mask_from=mask_from,
         )
 
     def to_fits(self, folder: str | os.PathLike) -> Path:
@@ -473,7 +496,8 @@ def _as_image(array: np.ndarray, label: str) -> np.ndarray:
 
 
 def _normalised_psf(psf: np.ndarray, name: str) -> np.ndarray:
-    """Validate an odd-sized, finite, positive-sum PSF and normalise it to unit sum."""
+    """Validate an odd-sized, finite, positive-sum PSF without deep negative entries
+    (:data:`PSF_NEGATIVE_FRACTION`) and normalise it to unit sum."""
     if psf.shape[0] % 2 == 0 or psf.shape[1] % 2 == 0:
         raise ImagingError(
             f"psf must have an odd size in both axes so that its centre is a pixel, got "
@@ -493,6 +517,14 @@ def _normalised_psf(psf: np.ndarray, name: str) -> np.ndarray:
             "right file and HDU were given",
             component="psf",
         )
+    peak = float(psf.max())
+    if psf.min() < -PSF_NEGATIVE_FRACTION * peak:  # peak > 0 since the total is
+        raise ImagingError(
+            f"psf has negative entries down to {psf.min():.4g} against a peak of {peak:.4g} "
+            f"(more than {PSF_NEGATIVE_FRACTION:g} of the peak); a PSF is a non-negative "
+            "kernel: check the file, the HDU and the sign, or set its noise pixels to 0",
+            component="psf",
+        )
     if abs(total - 1.0) > PSF_SUM_TOLERANCE:
         label = f" of {name}" if name else ""
         logger.info("PSF%s sums to %.9g, not 1: normalised to unit sum", label, total)
@@ -502,14 +534,16 @@ def _normalised_psf(psf: np.ndarray, name: str) -> np.ndarray:
 
 def _check_unmasked_values(data: np.ndarray, noise_map: np.ndarray, used: np.ndarray) -> None:
     """Raise unless data and noise are finite and noise > 0 at the ``used`` pixels."""
-    fix = "mask those pixels (mask=True) or repair the file"
+    fix = (
+        "exclude those pixels (mask.fits, nonzero = excluded, or a smaller mask) or repair the file"
+    )
     _raise_if_any(~np.isfinite(data) & used, "data", "NaN/inf values", fix)
     _raise_if_any(~np.isfinite(noise_map) & used, "noise_map", "NaN/inf values", fix)
     _raise_if_any(
         (noise_map <= 0) & used,
         "noise_map",
         "values <= 0",
-        "mask those pixels or give them a huge noise (e.g. 1e8) to remove them from χ²",
+        "exclude those pixels or give them a huge noise (e.g. 1e8) to remove them from χ²",
     )
 
 
@@ -518,7 +552,7 @@ def _raise_if_any(bad: np.ndarray, label: str, problem: str, fix: str) -> None:
         row, col = np.argwhere(bad)[0]
         raise ImagingError(
             f"{label} has {int(bad.sum())} {problem} at unmasked pixels (first at row {row}, "
-            f"col {col}); {fix}",
+            f"col {col}), which the fit uses (masked pixels may hold anything); {fix}",
             component=label,
         )
 

@@ -76,6 +76,16 @@ def circular(
         return check_mask(mask, shape)
 
 
+def largest_inside_radius(
+    shape: tuple[int, int], pixel_scale: float, centre: tuple[float, float] = (0.0, 0.0)
+) -> float:
+    """Radius (arcsec) of the largest circle about ``centre`` inside the image: the
+    distance from ``centre`` to the nearest outer edge of the image's border pixels
+    (negative if ``centre`` lies outside the image)."""
+    half_y, half_x = (0.5 * n * pixel_scale for n in shape)
+    return float(min(half_x - abs(centre[0]), half_y - abs(centre[1])))
+
+
 def annular(
     shape: tuple[int, int],
     pixel_scale: float,

@@ -17,6 +17,7 @@ from snakemake.utils import validate
 from mgelens.imaging import INFO_FILE, MASK_FILE
 from mgelens.provenance import code_version
 from mgelens.pipeline.settings import SettingsError, settings_from_mapping
+from mgelens.sheet import SheetError, read_sample_sheet
 
 
 validate(config, schema="../schemas/config.schema.yaml")
@@ -44,29 +45,21 @@ def repo_path(value: str) -> Path:
     return path if path.is_absolute() else Path(os.path.normpath(REPO / path))
 
 
-def read_sample_sheet(path: Path) -> pd.DataFrame:
-    """The sample sheet (tab-separated, one row per lens), indexed by lens id."""
+def sample_sheet(path: Path) -> pd.DataFrame:
+    """The sample sheet (:func:`mgelens.sheet.read_sample_sheet`), indexed by lens id."""
     if not path.is_file():
         raise WorkflowError(
             f"sample sheet {path} not found: set `samples` in the config to a .tsv file "
             f"(relative paths start at the repository root {REPO})"
         )
-    sheet = pd.read_csv(
-        path, sep="\t", comment="#", dtype={"lens": str, "mock": str, "input": str}
-    )
-    if "lens" not in sheet.columns:
-        raise WorkflowError(
-            f"sample sheet {path} has no `lens` column (columns read: {list(sheet.columns)}); "
-            "the sheet is tab-separated with a header line, see config/lenses.tsv"
-        )
-    duplicated = sheet["lens"][sheet["lens"].duplicated()].tolist()
-    if duplicated:
-        raise WorkflowError(f"{path}: lens ids must be unique, repeated: {duplicated}")
-    return sheet.set_index("lens", drop=False)
+    try:
+        return read_sample_sheet(path)
+    except SheetError as error:
+        raise WorkflowError(str(error)) from None
 
 
 SAMPLE_SHEET = repo_path(config["samples"])
-LENSES = read_sample_sheet(SAMPLE_SHEET)
+LENSES = sample_sheet(SAMPLE_SHEET)
 try:
     validate(LENSES, schema="../schemas/lenses.schema.yaml")
 except WorkflowError as error:
@@ -74,9 +67,22 @@ except WorkflowError as error:
 DATA_DIR = repo_path(config["data_dir"])
 
 
+def lens_row(lens: str) -> pd.Series:
+    """The sheet's row of a lens. A target of a lens that the sheet does not list (one of
+    another sample?) stops here, naming the sheet and its lenses: the `lens` wildcard
+    takes any id, so that the rules reach this check instead of "No rule to produce"."""
+    if lens not in LENSES.index:
+        raise WorkflowError(
+            f"lens {lens!r} is not in the sample sheet {SAMPLE_SHEET}, whose lenses are "
+            f"{', '.join(LENSES.index)}; add a row for it, or give its sample's config "
+            "with --configfile"
+        )
+    return LENSES.loc[lens]
+
+
 def real_input_folder(lens: str) -> Path:
     """Input folder of a real lens: its `input` column, under `data_dir` if relative."""
-    folder = Path(LENSES.loc[lens, "input"]).expanduser()
+    folder = Path(lens_row(lens)["input"]).expanduser()
     return folder if folder.is_absolute() else DATA_DIR / folder
 
 
@@ -96,21 +102,25 @@ def check_real_inputs() -> None:
 check_real_inputs()
 
 
-def id_pattern(ids) -> str:
-    """Regular expression matching exactly the given lens ids (never matches if empty)."""
+
+def other_than(ids) -> str:
+    """Regular expression of a lens id (one path part) other than the given ids."""
     ids = list(ids)
-    return "|".join(re.escape(i) for i in ids) if ids else "(?!)"
+    if not ids:
+        return "[^/]+"
+    return f"(?!(?:{'|'.join(re.escape(i) for i in ids)})/)[^/]+"
 
 
-MOCK_LENSES = id_pattern(LENSES.index[LENSES["kind"] == "mock"])
+MOCK_LENSES = other_than(LENSES.index[LENSES["kind"] == "real"])
+"""Lens ids the mock rules take: any but the real lenses' (unknown ids reach lens_row)."""
 
 
 wildcard_constraints:
-    lens=id_pattern(LENSES.index),
+    lens="[^/]+",
 
 
 def is_mock(lens: str) -> bool:
-    return LENSES.loc[lens, "kind"] == "mock"
+    return lens_row(lens)["kind"] == "mock"
 
 
 def imaging_folder(lens: str) -> str:
@@ -151,10 +161,10 @@ def preview_inputs(wildcards) -> dict:
 
 def simulate_recipe(wildcards) -> str:
     """CLI arguments naming the mock of a lens: a paper mock or a population lens."""
-    recipe = LENSES.loc[wildcards.lens, "mock"]
+    recipe = lens_row(wildcards.lens)["mock"]
     if recipe.startswith("P"):
         return f"--population-index {int(recipe[1:])} --population-seed {config['population_seed']}"
-    noise_seed = LENSES.loc[wildcards.lens].get("noise_seed")
+    noise_seed = lens_row(wildcards.lens).get("noise_seed")
     if noise_seed is None or pd.isna(noise_seed):
         return f"--mock {recipe}"
     return f"--mock {recipe} --noise-seed {int(noise_seed)}"
@@ -221,7 +231,7 @@ def phase_inputs(wildcards) -> dict:
 def phase_options(wildcards) -> str:
     """Per-lens CLI options from the sample sheet: the mask radius, and for LIGHT (the only
     phase that reads them) the MGE sets and point set; then the config's sampler seed."""
-    row = LENSES.loc[wildcards.lens]
+    row = lens_row(wildcards.lens)
     options = f"--mask-radius {row['mask_radius']}"
     if wildcards.phase == "light":
         options += f" --mge-sets {row['mge_sets']} --point-set {row['point_set']}"

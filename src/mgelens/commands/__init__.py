@@ -1,6 +1,7 @@
 """Subcommands of the ``mgelens`` CLI: one module each, exposing ``register(subparsers)``."""
 
 import argparse
+from pathlib import Path
 
 
 def add_threads_argument(parser: argparse.ArgumentParser) -> None:
@@ -8,3 +9,24 @@ def add_threads_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--threads", type=int, default=1, metavar="T", help="numba threads (default 1)"
     )
+
+
+def make_output_folders(*paths: Path | None) -> None:
+    """Create the folder of every output path given (``None`` skipped) before any work, so
+    that an unwritable output stops a command at once.
+
+    Raises
+    ------
+    OSError
+        Naming the output and why its folder cannot be made (e.g. a path under a file).
+    """
+    for path in paths:
+        if path is None:
+            continue
+        try:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise OSError(
+                f"cannot write {path}: {error.filename}: {error.strerror or error}; choose an "
+                "output path in a writable folder (not under a file)"
+            ) from error

@@ -29,9 +29,15 @@ import numpy as np
 from astropy.io import fits
 
 from mgelens.atomic import atomic_path, write_fits, write_json
-from mgelens.commands import add_threads_argument
+from mgelens.commands import add_threads_argument, make_output_folders
 from mgelens.convolve import convolve_image
-from mgelens.imaging import PIXSCALE_KEY, ImagingError, read_fits_image, read_psf
+from mgelens.imaging import (
+    PIXSCALE_KEY,
+    ImagingError,
+    check_positive,
+    read_fits_image,
+    read_psf,
+)
 from mgelens.isophotes import (
     IsophoteStatistics,
     brightest_pixel_centre,
@@ -106,13 +112,14 @@ def format_statistics(lens: str, statistics: IsophoteStatistics) -> str:
 def run(args: argparse.Namespace) -> int:
     limit_threads(args.threads)
     try:
+        make_output_folders(args.out, args.summary, args.figure, args.save_image)
         if args.phase is not None:
             image, centre, mass = _phase_light(args)
             source = args.phase
         else:
             image, centre, mass = _image_light(args), args.centre, None
             source = args.image
-    except (ImagingError, ValueError, PhaseInputError) as exc:
+    except (ImagingError, ValueError, PhaseInputError, OSError) as exc:
         logger.error("%s", exc)
         return 1
     if centre is None:
@@ -155,7 +162,9 @@ def _image_light(args: argparse.Namespace) -> np.ndarray:
             raise ValueError(
                 f"{args.image}: no {PIXSCALE_KEY} keyword in the header; pass --pixel-scale"
             )
-        args.pixel_scale = float(header[PIXSCALE_KEY])
+        label = f"{args.image}: header {PIXSCALE_KEY} (arcsec/pixel)"
+        args.pixel_scale = check_positive(header[PIXSCALE_KEY], label)
+    args.pixel_scale = check_positive(args.pixel_scale, "--pixel-scale (arcsec/pixel)")
     if args.psf is not None:
         image = convolve_image(image, read_psf(args.psf))
     return image
@@ -165,7 +174,8 @@ def _phase_light(args: argparse.Namespace):
     """(image, centre, MassShape) of the lens light of the phase folder ``args.phase``."""
     if args.psf is None:
         raise ValueError("--phase needs --psf: the PSF of the lens's imaging (psf.fits)")
-    args.pixel_scale = args.pixel_scale or DEFAULT_PIXEL_SCALE
+    scale = DEFAULT_PIXEL_SCALE if args.pixel_scale is None else args.pixel_scale
+    args.pixel_scale = check_positive(scale, "--pixel-scale (arcsec/pixel)")
     profiles = lens_light_profiles(args.phase)
     centre = profiles[0].centre
     image = render_light(profiles, args.pixel_scale, psf=read_psf(args.psf), centre=centre)

@@ -20,10 +20,12 @@ import json
 import logging
 from pathlib import Path
 
+from mgelens.commands import make_output_folders
 from mgelens.imaging import ImagingError
 from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import phases
 from mgelens.pipeline.settings import PHASES, PROFILES, SettingsError, load_settings
+from mgelens.search.results import RESULT_FILE
 
 logger = logging.getLogger("mgelens.pipeline")
 
@@ -78,8 +80,9 @@ def run(args: argparse.Namespace) -> int:
             mge_sets=args.mge_sets,
             point_set=None if args.point_set is None else args.point_set == "yes",
         )
+        make_output_folders(args.results / args.phase / RESULT_FILE)
         phases.run_phase(args.phase, args.lens_dir, args.results, settings, seed=args.seed)
-    except (SettingsError, ImagingError, phases.PhaseInputError, ValueError) as error:
+    except (SettingsError, ImagingError, phases.PhaseInputError, ValueError, OSError) as error:
         logger.error("phase %s: %s", args.phase, error)
         return 1
     return 0

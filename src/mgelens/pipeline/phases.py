@@ -13,9 +13,11 @@ one phase folder out.
 * ``model.fits`` (:mod:`mgelens.pipeline.products`); SPix1 also writes
   ``adapt_image.fits``, its lensed-source model, which SPix2, LIGHT and MASS use;
 * ``phase.log`` (appended to on every run) and, while sampling, the sampler's checkpoint
-  ``checkpoint-<hash>.pickle``. The hash covers the parameter space, sampler settings,
-  seed, fit settings and input checksums: a rerun with the same inputs resumes, a rerun
-  with changed inputs starts afresh. The checkpoint is deleted once the results are in.
+  ``checkpoint-<hash>.pickle`` (nautilus: ``.h5``) with its JSON sidecar
+  ``checkpoint-<hash>.fingerprint.json``, checked before the checkpoint is read. The hash
+  covers the parameter space, sampler settings, seed, fit settings and input checksums: a
+  rerun with the same inputs resumes, a rerun with changed inputs starts afresh. The
+  checkpoint is deleted once the results are in.
 
 A phase reads only earlier phases' ``result.json`` and ``samples.csv`` (and SPix1's adapt
 image), so any phase can be rerun alone. Every file is written atomically, ``result.json``
@@ -35,6 +37,7 @@ SPix1 and SPix2, 3 Sérsics in LIGHT, Sérsics and EPL + shear together in MASS.
 
 import contextlib
 import dataclasses
+import functools
 import hashlib
 import importlib.util
 import json
@@ -58,10 +61,10 @@ from mgelens.fit import (
 )
 from mgelens.geometry import axis_ratio_and_angle_from
 from mgelens.grid import pixel_centres
-from mgelens.imaging import INFO_FILE, MASK_FILE, Imaging
+from mgelens.imaging import DATA_FILE, INFO_FILE, MASK_FILE, Imaging
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
-from mgelens.pipeline import models, products
+from mgelens.pipeline import fittable, models, products
 from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
 from mgelens.provenance import code_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -153,13 +156,15 @@ class EarlierPhase:
             )
 
 
-def read_phase(results_dir: str | Path, name: str) -> EarlierPhase:
+def read_phase(results_dir: str | Path, name: str, allow_unconverged: bool = False) -> EarlierPhase:
     """The finished phase ``name`` in ``results_dir``.
 
     Raises
     ------
     PhaseInputError
-        If its ``result.json`` is missing, naming the command that makes it.
+        If its ``result.json`` is missing, naming the command that makes it, or records a
+        sampler that did not converge (unless ``allow_unconverged``,
+        ``slam.allow_unconverged``).
     """
     folder = Path(results_dir) / name
     if not (folder / RESULT_FILE).is_file():
@@ -168,7 +173,22 @@ def read_phase(results_dir: str | Path, name: str) -> EarlierPhase:
             f"(mgelens phase {name} --results {results_dir} ...)"
         )
     record = _record(folder)
-    return EarlierPhase(folder, PhaseResult.read(folder), record)
+    result = PhaseResult.read(folder)
+    if not (result.output.converged or allow_unconverged):
+        raise PhaseInputError(
+            f"{folder / RESULT_FILE} is not converged ({result.output.stop_reason}): rerun "
+            f"phase {name!r} without the cap or with more live points, or set "
+            "slam.allow_unconverged: true to build on it anyway"
+        )
+    return EarlierPhase(folder, result, record)
+
+
+def earlier_phases(
+    results_dir: str | Path, settings: SlamSettings, *names: str
+) -> tuple[EarlierPhase, ...]:
+    """The finished phases ``names`` (:func:`read_phase` with the settings'
+    ``allow_unconverged``)."""
+    return tuple(read_phase(results_dir, name, settings.allow_unconverged) for name in names)
 
 
 def resolve_mask_radius(lens_dir: Path, settings: SlamSettings) -> float:
@@ -192,13 +212,22 @@ def load_dataset(
     """Imaging of ``lens_dir`` in the circular mask of the settings, and the mask radius.
 
     A ``mask.fits`` in the folder is combined with the circle (a pixel is used only if
-    both use it). ``light_centre`` (arcsec) is where light profiles are over-sampled.
+    both use it); only the pixels used must hold finite data and a positive noise.
+    ``light_centre`` (arcsec) is where light profiles are over-sampled.
+
+    Raises
+    ------
+    ImagingError
+        Naming ``data.fits``, for a circle reaching beyond the image or data without
+        light inside it (:mod:`mgelens.pipeline.fittable`), and for unreadable or invalid
+        files (:class:`~mgelens.imaging.Imaging`).
     """
-    imaging = Imaging.from_folder(lens_dir)
     radius = resolve_mask_radius(lens_dir, settings)
-    mask = mask_module.circular(imaging.shape, imaging.pixel_scale, radius, settings.mask_centre)
-    if imaging.mask is not None:
-        mask = mask | imaging.mask
+    data_file = lens_dir / DATA_FILE
+    circle = functools.partial(_fit_circle, data_file, radius, settings.mask_centre)
+    imaging = Imaging.from_folder(lens_dir, mask_from=circle)
+    mask = imaging.mask
+    fittable.check_signal(data_file, imaging, mask, radius)
     fit_settings = FitSettings(
         positive_only=settings.positive_only,
         sub_size=settings.sub_size,
@@ -211,6 +240,19 @@ def load_dataset(
         psf_trim=settings.psf_trim,
     )
     return FitDataset.from_imaging(imaging, mask, fit_settings, light_centre), radius
+
+
+def _fit_circle(
+    data_file: Path,
+    radius: float,
+    centre: tuple[float, float],
+    shape: tuple[int, int],
+    pixel_scale: float,
+) -> np.ndarray:
+    """The fit's circular mask on an image of ``shape`` (True = excluded), refused if it
+    reaches beyond the image."""
+    fittable.check_circle_inside(data_file, shape, pixel_scale, radius, centre)
+    return mask_module.circular(shape, pixel_scale, radius, centre)
 
 
 def _imaging_files(lens_dir: Path) -> list[Path]:
@@ -573,6 +615,15 @@ def _solve(
     _write_outputs(folder, phase, best, record, lens_dir.name)
     for stale in folder.glob(f"{CHECKPOINT_PREFIX}*"):
         stale.unlink()
+    if not output.converged:
+        logger.warning(
+            "phase %s of %s did not converge (%s): %s records converged: false, and later "
+            "phases refuse it unless slam.allow_unconverged is true",
+            best_problem.name,
+            lens_dir,
+            output.stop_reason,
+            folder / RESULT_FILE,
+        )
     logger.info(
         "phase %s done: ln Z = %.3f, max ln L = %.3f, %d calls (%d rejected), %.1f s",
         best_problem.name,
@@ -677,7 +728,7 @@ def sp_light_model(sp: EarlierPhase, source: models.SourceModel) -> models.Phase
 
 def spix1_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """SPix1: lens light fixed (SP), SIE + shear passed from SP, overlay mesh (8)."""
-    sp = read_phase(results_dir, "sp")
+    (sp,) = earlier_phases(results_dir, settings, "sp")
     sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
     x, y = overlay_centres(dataset.mask, dataset.imaging.pixel_scale, settings.overlay_shape)
@@ -720,7 +771,7 @@ def _kmeans_source(
 def spix2_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """SPix2: lens light (SP) and mass (SPix1) fixed, k-means mesh + AdaptiveBrightnessSplit
     hyper-parameters free (5)."""
-    sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
+    sp, spix1 = earlier_phases(results_dir, settings, "sp", "spix1")
     sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
     source, adapt_path = _kmeans_source(dataset, results_dir, settings)
@@ -737,8 +788,7 @@ def spix2_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> 
 def light_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """LIGHT: MGE refit (N×30 + point set) or 3 Sérsics, mass (SPix1) and source (SPix2)
     fixed."""
-    sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
-    spix2 = read_phase(results_dir, "spix2")
+    sp, spix1, spix2 = earlier_phases(results_dir, settings, "sp", "spix1", "spix2")
     sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
     kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
@@ -763,9 +813,7 @@ def light_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> 
 def mass_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
     """MASS: lens light (LIGHT) and source (SPix2) fixed, EPL + shear (8); the 3×Sérsic
     chain fits LIGHT's Sérsics together with the mass (22)."""
-    sp, spix1 = read_phase(results_dir, "sp"), read_phase(results_dir, "spix1")
-    spix2 = read_phase(results_dir, "spix2")
-    light = read_phase(results_dir, "light")
+    sp, spix1, spix2, light = earlier_phases(results_dir, settings, "sp", "spix1", "spix2", "light")
     light.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, models.light_centre(light.result))
     kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
@@ -835,6 +883,14 @@ def run_phase(
     with _phase_log(folder):
         runs = chain_settings(name, settings)
         problems = [PROBLEMS[name](lens_dir, results_dir, s) for s in runs]
+        first = problems[0]
+        fittable.check_pixels_per_parameter(
+            lens_dir / DATA_FILE,
+            first.dataset.imaging,
+            first.dataset.mask,
+            first.mask_radius,
+            first.space.n_free,
+        )
         return _solve(problems, folder, settings, seed, lens_dir)
 
 

@@ -17,8 +17,9 @@ Two profiles give the defaults (:data:`PROFILES`):
 
 A YAML file may override any field under a top-level ``slam:`` key; other top-level keys
 (the workflow's own configuration) are ignored. Per-phase sampler settings go under
-``slam: samplers: <phase>:`` and are merged into the profile's. Unknown keys raise
-:class:`SettingsError` naming the key. Example::
+``slam: samplers: <phase>:`` and are merged into the profile's. Unknown keys and values of
+the wrong type or range raise :class:`SettingsError` naming the key by its dotted path
+(``slam.sub_size``, ``slam.samplers.mass.n_live``; :mod:`mgelens.values`). Example::
 
     slam:
       positive_only: false        # pn-MGE
@@ -35,6 +36,7 @@ from types import MappingProxyType
 
 import yaml
 
+from mgelens import values
 from mgelens.search.sampler import SamplerSettings
 from mgelens.source.mesh import EDGE_RULES
 from mgelens.source.regularization import SIGNAL_AVERAGES
@@ -138,6 +140,11 @@ class SlamSettings:
         M1 it moved the peak of ln ε along γ (other mass parameters true) by < 0.0001
         and gave the same MASS posterior (γ 2.086 (2.053, 2.113) against 2.088 (2.072,
         2.111) with 4×4, truth 2.1).
+    allow_unconverged : bool
+        Let a phase build on an earlier phase whose sampler did not converge (its
+        ``result.json`` says ``converged: false``, e.g. capped by ``max_calls``). Off, such a
+        phase stops with a message naming the file (:func:`mgelens.pipeline.phases.read_phase`);
+        on, for smoke tests of the plumbing.
     samplers : mapping of phase name to SamplerSettings
         The non-linear search of each phase. ``method="nautilus"`` falls back to
         ``dynesty_static`` with the same live points if nautilus is not installed (it is a
@@ -172,40 +179,19 @@ class SlamSettings:
     lp_centre_radius: float = 0.3
     use_border: bool = True
     psf_trim: float = 1e-10
+    allow_unconverged: bool = False
     samplers: Mapping[str, SamplerSettings] = field(default_factory=dict)
 
     def __post_init__(self):
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if f.type is bool and not isinstance(value, bool):
-                raise SettingsError(f"{f.name} must be true or false, got {value!r}")
-        _check_choice("lens_light_model", self.lens_light_model, LENS_LIGHT_MODELS)
-        _check_choice("mge_sets", self.mge_sets, MGE_SET_CHOICES)
-        _check_choice("spix1_regularization", self.spix1_regularization, SPIX1_REGULARIZATIONS)
-        _check_choice("kmeans_scheme", str(self.kmeans_scheme), KMEANS_SCHEMES)
-        _check_choice("interpolation", self.interpolation, INTERPOLATIONS)
-        _check_choice("cross_offset", self.cross_offset, CROSS_OFFSETS)
-        _check_choice("adaptive_signals", self.adaptive_signals, SIGNAL_AVERAGES)
-        _check_choice("edge_rule", self.edge_rule, EDGE_RULES)
-        _check_choice("prior_passing", self.prior_passing, PRIOR_PASSING_RULES)
-        if self.mask_radius is not None and not self.mask_radius > 0:
-            raise SettingsError(f"mask_radius must be > 0 arcsec, got {self.mask_radius}")
-        if not 0.0 <= self.psf_trim < 1.0:
-            raise SettingsError(f"psf_trim must be in [0, 1), got {self.psf_trim}")
-        if isinstance(self.mass_meshes, bool) or not (
-            isinstance(self.mass_meshes, int) and self.mass_meshes >= 1
-        ):
-            raise SettingsError(f"mass_meshes must be an integer >= 1, got {self.mass_meshes!r}")
-        if self.source_pixels < 3:
-            raise SettingsError(f"source_pixels must be at least 3, got {self.source_pixels}")
-        if len(self.overlay_shape) != 2 or min(self.overlay_shape) < 2:
-            raise SettingsError(f"overlay_shape must be two integers >= 2: {self.overlay_shape}")
+        try:
+            checked = _checked_fields(self)
+        except ValueError as error:
+            raise SettingsError(str(error)) from None
         missing = [p for p in PHASES if p not in self.samplers]
         if missing:
             raise SettingsError(f"sampler settings missing for phases {missing}")
-        object.__setattr__(self, "kmeans_scheme", str(self.kmeans_scheme))
-        object.__setattr__(self, "mask_centre", tuple(float(v) for v in self.mask_centre))
-        object.__setattr__(self, "overlay_shape", tuple(int(v) for v in self.overlay_shape))
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
         object.__setattr__(self, "samplers", MappingProxyType(dict(self.samplers)))
 
     def with_overrides(self, **changes) -> "SlamSettings":
@@ -221,9 +207,70 @@ class SlamSettings:
         return content
 
 
-def _check_choice(name: str, value, choices) -> None:
-    if value not in choices:
-        raise SettingsError(f"{name} must be one of {list(choices)}, got {value!r}")
+def _checked_fields(settings: SlamSettings) -> dict:
+    """Every field of ``settings`` but ``samplers`` checked (type, range or choice) and in
+    its canonical type; a ValueError names the field as ``slam.<field>``."""
+    checked = {}
+    for f in dataclasses.fields(settings):
+        name, value = f.name, getattr(settings, f.name)
+        key = f"slam.{name}"
+        if name in _CHOICES:
+            checked[name] = values.choice(key, value, _CHOICES[name])
+        elif name in _INTEGERS:
+            checked[name] = values.integer(key, value, _INTEGERS[name])
+        elif name in _NUMBERS:
+            checked[name] = values.number(key, value, **_NUMBERS[name])
+        elif f.type is bool:
+            checked[name] = values.boolean(key, value)
+    if settings.mask_radius is not None:
+        checked["mask_radius"] = values.number(
+            "slam.mask_radius", settings.mask_radius, 0.0, open_minimum=True
+        )
+    checked["mask_centre"] = values.pair(
+        "slam.mask_centre", settings.mask_centre, values.number, "two numbers (x, y) in arcsec"
+    )
+    checked["overlay_shape"] = values.pair(
+        "slam.overlay_shape",
+        settings.overlay_shape,
+        lambda name, n: values.integer(name, n, 2),
+        "two integers >= 2 (n_y, n_x)",
+    )
+    mge_sets = values.integer("slam.mge_sets", settings.mge_sets, 1)
+    checked["mge_sets"] = values.choice("slam.mge_sets", mge_sets, MGE_SET_CHOICES)
+    kmeans_scheme = settings.kmeans_scheme
+    if isinstance(kmeans_scheme, int) and not isinstance(kmeans_scheme, bool):
+        kmeans_scheme = str(kmeans_scheme)  # YAML reads `kmeans_scheme: 2024` as a number
+    checked["kmeans_scheme"] = values.choice("slam.kmeans_scheme", kmeans_scheme, KMEANS_SCHEMES)
+    return checked
+
+
+_CHOICES = {
+    "profile": ("quick", "paper"),
+    "lens_light_model": LENS_LIGHT_MODELS,
+    "spix1_regularization": SPIX1_REGULARIZATIONS,
+    "interpolation": INTERPOLATIONS,
+    "cross_offset": CROSS_OFFSETS,
+    "adaptive_signals": SIGNAL_AVERAGES,
+    "edge_rule": EDGE_RULES,
+    "prior_passing": PRIOR_PASSING_RULES,
+}
+"""Fields taking one of a few strings."""
+_INTEGERS = {
+    "source_pixels": 3,
+    "kmeans_seed": 0,
+    "mass_meshes": 1,
+    "sub_size": 1,
+    "lp_sub_size": 1,
+    "lp_sub_size_centre": 1,
+}
+"""Integer fields and their minimum."""
+_NUMBERS = {
+    "positions_factor": {"minimum": 0.0, "open_minimum": True},
+    "positions_minimum": {"minimum": 0.0},
+    "lp_centre_radius": {"minimum": 0.0},
+    "psf_trim": {"minimum": 0.0, "maximum": 1.0, "open_maximum": True},
+}
+"""Real-valued fields and their range (:func:`mgelens.values.number`)."""
 
 
 _PAPER_SAMPLERS = {
@@ -326,22 +373,37 @@ def settings_from_mapping(
         content.setdefault("positive_only", False)  # the paper's 3×Sérsic runs (SPEC §8.1)
     profile = profile or content.pop("profile", None) or DEFAULT_PROFILE
     content.pop("profile", None)
+    if profile not in PROFILES:
+        raise SettingsError(
+            f"{origin}: slam.profile must be one of {sorted(PROFILES)}, got {profile!r}"
+        )
     base = profile_settings(profile)
     known = {f.name for f in dataclasses.fields(SlamSettings)} - {"profile"}
     unknown = sorted(set(content) - known)
     if unknown:
         raise SettingsError(f"{origin}: unknown key slam.{unknown[0]}; known keys: {sorted(known)}")
     samplers = dict(base.samplers)
-    for phase, overrides in (content.pop("samplers", None) or {}).items():
+    section = content.pop("samplers", None) or {}
+    if not isinstance(section, Mapping):
+        raise SettingsError(
+            f"{origin}: slam.samplers must be a mapping of phase names to sampler settings, "
+            f"got {section!r}"
+        )
+    for phase, overrides in section.items():
         if phase not in PHASES:
             raise SettingsError(
                 f"{origin}: unknown key slam.samplers.{phase}; phases are {list(PHASES)}"
             )
+        if not isinstance(overrides or {}, Mapping):
+            raise SettingsError(
+                f"{origin}: slam.samplers.{phase} must be a mapping of sampler settings "
+                f"(e.g. {{n_live: 80}}), got {overrides!r}"
+            )
         merged = {**samplers[phase].to_dict(), **(overrides or {})}
         try:
             samplers[phase] = SamplerSettings.from_dict(merged)
-        except (TypeError, ValueError) as error:
-            raise SettingsError(f"{origin}: slam.samplers.{phase}: {error}") from error
+        except (TypeError, ValueError) as error:  # the message starts with the key
+            raise SettingsError(f"{origin}: slam.samplers.{phase}.{error}") from error
     try:
         return dataclasses.replace(base, samplers=samplers, **content)
     except (TypeError, ValueError) as error:

@@ -2,7 +2,8 @@
 
 A phase folder holds
 
-* ``result.json``: phase name; max-likelihood and median values with 1σ (68.27 %) and
+* ``result.json``: phase name; whether the sampler converged (``converged``) and why it
+  stopped (``stop_reason``); max-likelihood and median values with 1σ (68.27 %) and
   3σ (99.73 %) central credible intervals of every parameter under its dotted name, with
   the derived axis ratio / angle next to each ell_comps pair and the shear magnitude /
   angle next to each (gamma_1, gamma_2) pair; log evidence; sampler statistics and
@@ -177,6 +178,8 @@ class PhaseResult:
         """The content of ``result.json``."""
         return {
             "phase": self.phase,
+            "converged": self.output.converged,
+            "stop_reason": self.output.stop_reason,
             "log_evidence": self.output.log_evidence,
             "log_evidence_error": self.output.log_evidence_error,
             "max_log_likelihood": float(self.output.log_likelihoods.max()),
@@ -211,7 +214,8 @@ class PhaseResult:
 
     @classmethod
     def read(cls, folder: str | Path) -> "PhaseResult":
-        """Read the result written by :meth:`write` into ``folder``."""
+        """Read the result written by :meth:`write` into ``folder`` (a file written before
+        convergence was recorded reads as converged, with an empty stop reason)."""
         folder = Path(folder)
         summary = json.loads((folder / RESULT_FILE).read_text())
         table = pd.read_csv(folder / SAMPLES_FILE)
@@ -231,6 +235,8 @@ class PhaseResult:
             method=sampler["method"],
             settings=sampler["settings"],
             seed=sampler["seed"],
+            converged=sampler.get("converged", True),
+            stop_reason=sampler.get("stop_reason", ""),
         )
         return cls(
             phase=summary["phase"],

@@ -11,11 +11,15 @@
   exists when :func:`run_nested` starts, the sampler is restored from it (RNG state
   included) and continues, so an interrupted run finishes with the same samples and log
   evidence as an uninterrupted one. The checkpoint carries a fingerprint of the parameter
-  space, the settings and the seed; a mismatch raises :class:`CheckpointMismatchError`
-  instead of silently continuing a different fit. The checkpoint is **kept** after a
+  space, the settings and the seed, and so does its JSON sidecar
+  ``<stem>.fingerprint.json``, which is checked *before* the checkpoint is unpickled
+  (unpickling can run code): a mismatch, or a checkpoint without its sidecar, raises
+  :class:`CheckpointMismatchError` instead of loading a foreign file or silently
+  continuing a different fit. The checkpoint is **kept** after a
   successful run: calling :func:`run_nested` again returns the stored run without sampling.
   Callers delete it once their result files are written if they want the space back.
-  Nautilus checkpoints to ``<checkpoint stem>.h5`` when ``h5py`` is importable.
+  Nautilus checkpoints to ``<checkpoint stem>.h5`` (HDF5, no code) when ``h5py`` is
+  importable, with the same sidecar.
 * **Quiet progress**: no progress bar; one line every ``progress_every`` seconds through
   ``log`` (default: the ``mgelens.search`` logger at INFO level).
 * **Parallel likelihoods**: ``n_processes > 1`` runs a ``multiprocessing`` pool ("spawn"
@@ -49,6 +53,7 @@ import dynesty.utils
 import numpy as np
 from scipy import special
 
+from mgelens import values
 from mgelens.atomic import atomic_path, write_json
 from mgelens.memory import keep_freed_memory
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -143,21 +148,21 @@ discard_exploration
     queue_size: int | None = None
 
     def __post_init__(self):
-        if self.method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        if self.n_live < 2:
-            raise ValueError(f"n_live must be at least 2, got {self.n_live}")
-        if self.n_processes < 1:
-            raise ValueError(f"n_processes must be at least 1, got {self.n_processes}")
-        if self.max_iterations is not None:
-            if self.method == "nautilus":
-                raise ValueError("max_iterations applies to the dynesty samplers only")
-            if self.max_iterations < 1:
-                raise ValueError(f"max_iterations must be >= 1, got {self.max_iterations}")
-        if self.max_calls is not None and self.max_calls < 1:
-            raise ValueError(f"max_calls must be >= 1, got {self.max_calls}")
-        if self.checkpoint_every < 0 or self.progress_every < 0:
-            raise ValueError("checkpoint_every and progress_every must be >= 0 seconds")
+        """Check every field's type and range; a ValueError starts with the field's name."""
+        values.choice("method", self.method, METHODS)
+        values.choice("bound", self.bound, BOUNDS)
+        values.choice("sample", self.sample, SAMPLE_METHODS)
+        for name, minimum in _INTEGER_FIELDS.items():
+            value = getattr(self, name)
+            if not (value is None and name in _OPTIONAL_FIELDS):
+                values.integer(name, value, minimum)
+        for name, limits in _NUMBER_FIELDS.items():
+            value = getattr(self, name)
+            if not (value is None and name in _OPTIONAL_FIELDS):
+                values.number(name, value, **limits)
+        values.boolean("discard_exploration", self.discard_exploration)
+        if self.max_iterations is not None and self.method == "nautilus":
+            raise ValueError("max_iterations applies to the dynesty samplers only")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -165,15 +170,50 @@ discard_exploration
     @classmethod
     def from_dict(cls, content: dict) -> "SamplerSettings":
         known = {f.name for f in fields(cls)}
-        unknown = set(content) - known
+        unknown = sorted(set(content) - known)
         if unknown:
-            raise ValueError(f"unknown sampler settings {sorted(unknown)}; known: {sorted(known)}")
+            raise ValueError(
+                f"{unknown[0]}: unknown sampler settings {unknown}; known: {sorted(known)}"
+            )
         return cls(**content)
 
     def result_settings(self) -> dict:
         """The settings that determine the result (all but the execution fields)."""
         execution = ("checkpoint_every", "progress_every", "n_processes")
         return {k: v for k, v in self.to_dict().items() if k not in execution}
+
+
+BOUNDS = ("none", "single", "multi", "balls", "cubes")
+"""dynesty's bounding methods."""
+SAMPLE_METHODS = ("auto", "unif", "rwalk", "slice", "rslice")
+"""dynesty's sampling methods ("auto": :func:`resolve_sample_method`)."""
+_INTEGER_FIELDS = {
+    "n_live": 2,
+    "walks": 1,
+    "slices": 1,
+    "n_effective": 1,
+    "max_iterations": 1,
+    "max_calls": 1,
+    "n_networks": 1,
+    "n_batch": 1,
+    "n_shell": 1,
+    "n_processes": 1,
+    "queue_size": 1,
+}
+"""Integer settings and their minimum."""
+_NUMBER_FIELDS = {
+    "dlogz": {"minimum": 0.0, "open_minimum": True},
+    "facc": {"minimum": 0.0, "maximum": 1.0, "open_minimum": True},
+    "enlarge_per_dim": {"minimum": 1.0},
+    "split_threshold": {"minimum": 0.0, "open_minimum": True},
+    "f_live": {"minimum": 0.0, "maximum": 1.0, "open_minimum": True},
+    "n_eff": {"minimum": 0.0},
+    "checkpoint_every": {"minimum": 0.0},
+    "progress_every": {"minimum": 0.0},
+}
+"""Real-valued settings and their range (:func:`mgelens.values.number`)."""
+_OPTIONAL_FIELDS = ("dlogz", "n_effective", "max_iterations", "max_calls", "queue_size")
+"""Settings that may be ``None`` (dynesty's default, or no cap)."""
 
 
 SIGMA_PROBABILITY = {1: math.erf(1.0 / math.sqrt(2.0)), 3: math.erf(3.0 / math.sqrt(2.0))}
@@ -253,6 +293,13 @@ class SamplerOutput:
     settings : dict
         :meth:`SamplerSettings.to_dict` of the run.
     seed : int
+    converged : bool
+        Whether the sampler met its stopping criterion (dynesty static: the remaining
+        Δln Z below ``dlogz``; dynamic: its own criterion; nautilus: ``f_live``,
+        ``n_shell`` and ``n_eff``) rather than a cap (``max_iterations``, ``max_calls``) or
+        a likelihood plateau. A run that did not converge has an unreliable posterior.
+    stop_reason : str
+        Why the sampler stopped, in words (recorded in result files).
     """
 
     names: tuple[str, ...]
@@ -268,6 +315,8 @@ class SamplerOutput:
     method: str
     settings: dict
     seed: int
+    converged: bool = True
+    stop_reason: str = ""
 
     def __post_init__(self):
         samples = np.asarray(self.samples, dtype=float).reshape(-1, len(self.names))
@@ -332,6 +381,8 @@ class SamplerOutput:
             "runtime_s": self.runtime,
             "n_resumes": self.n_resumes,
             "seed": self.seed,
+            "converged": self.converged,
+            "stop_reason": self.stop_reason,
             "settings": self.settings,
         }
 
@@ -349,7 +400,8 @@ def pool_runs(outputs: Sequence[SamplerOutput]) -> SamplerOutput:
     ``log_evidence`` is the mean of the runs' ln Z and ``log_evidence_error`` adds their
     own errors (in quadrature, divided by K) to the standard deviation of the ln Z values
     (the discretisation scatter). Calls, rejections, runtimes and resumes are summed;
-    method, settings and seed are the first run's.
+    method, settings and seed are the first run's. The pool converged if every run did;
+    its stop reason lists each run's.
 
     Raises
     ------
@@ -384,6 +436,10 @@ def pool_runs(outputs: Sequence[SamplerOutput]) -> SamplerOutput:
         method=outputs[0].method,
         settings=outputs[0].settings,
         seed=outputs[0].seed,
+        converged=all(output.converged for output in outputs),
+        stop_reason="; ".join(
+            f"run {k + 1}: {output.stop_reason}" for k, output in enumerate(outputs)
+        ),
     )
 
 
@@ -501,6 +557,29 @@ def _fingerprint(space: ParameterSpace, settings: SamplerSettings, seed: int) ->
     return json.loads(json.dumps(content))
 
 
+def fingerprint_path(checkpoint: Path) -> Path:
+    """The JSON sidecar of a checkpoint file: ``<stem>.fingerprint.json``."""
+    return checkpoint.with_suffix(".fingerprint.json")
+
+
+def _check_sidecar(checkpoint: Path, expected: dict) -> None:
+    """Compare a checkpoint's JSON sidecar with ``expected`` before the checkpoint itself
+    is read (a pickle can run code when loaded, so a foreign one is never unpickled)."""
+    sidecar = fingerprint_path(checkpoint)
+    if not sidecar.is_file():
+        raise CheckpointMismatchError(
+            f"checkpoint {checkpoint} has no {sidecar.name} to check it against these "
+            "settings; delete it to start afresh"
+        )
+    try:
+        stored = json.loads(sidecar.read_text())
+    except (OSError, ValueError) as error:
+        raise CheckpointMismatchError(
+            f"{sidecar}: unreadable ({error}); delete it and {checkpoint.name} to start afresh"
+        ) from error
+    _check_fingerprint(checkpoint, stored, expected)
+
+
 def _check_fingerprint(path: Path, stored: dict, expected: dict) -> None:
     if stored != expected:
         differing = sorted(k for k in expected if stored.get(k) != expected.get(k))
@@ -573,7 +652,9 @@ def _new_dynesty_sampler(settings: SamplerSettings, n_dim: int, seed: int, pool)
 
 def _run_dynesty(
     sampler, settings: SamplerSettings, progress, checkpoint: str | None, resume, calls_so_far
-):
+) -> tuple[bool, str]:
+    """Run (or continue) a dynesty sampler; return (converged, stop reason)."""
+    maxcall = None if settings.max_calls is None else max(settings.max_calls - calls_so_far, 1)
     common = {
         "print_progress": True,
         "print_func": progress,
@@ -581,13 +662,52 @@ def _run_dynesty(
         "checkpoint_every": settings.checkpoint_every,
         "resume": resume,
         "maxiter": settings.max_iterations,
-        "maxcall": None
-        if settings.max_calls is None
-        else max(settings.max_calls - calls_so_far, 1),
+        "maxcall": maxcall,
     }
-    with warnings.catch_warnings():  # mgelens logs its own warning for max_iterations
+    iterations_before, calls_before = sampler.it, sampler.ncall
+    with warnings.catch_warnings():  # mgelens logs its own warning for the caps
         warnings.filterwarnings("ignore", "The sampling was stopped short", UserWarning)
         _run_dynesty_quietly(sampler, settings, common)
+    cap = _reached_cap(
+        settings, maxcall, sampler.it - iterations_before, sampler.ncall - calls_before
+    )
+    if settings.method == "dynesty_dynamic":
+        if cap:
+            return False, f"stopped at {cap} before the dynamic stopping criterion was reached"
+        return True, "dynamic stopping criterion reached"
+    delta, dlogz = final_delta_log_evidence(sampler), _static_dlogz(settings)
+    if delta < dlogz:
+        return True, f"remaining Δln Z = {delta:.4g} below dlogz = {dlogz:.4g}"
+    stop = f"stopped at {cap}" if cap else "stopped on a likelihood plateau"
+    return False, f"{stop} with remaining Δln Z = {delta:.4g} above dlogz = {dlogz:.4g}"
+
+
+def _reached_cap(settings: SamplerSettings, maxcall: int | None, iterations, calls) -> str:
+    """The cap that ended a dynesty session ("" if none), judged on dynesty's own counts:
+    dynesty stops once its session's iterations or calls pass the caps it was given. Its
+    call count leaves out the first live points, so mgelens's own call counter, which
+    includes them, can end below ``max_calls`` for a run that the cap stopped."""
+    if settings.max_iterations is not None and iterations >= settings.max_iterations:
+        return f"max_iterations = {settings.max_iterations}"
+    if maxcall is not None and calls >= maxcall:
+        return f"max_calls = {settings.max_calls}"
+    return ""
+
+
+def _static_dlogz(settings: SamplerSettings) -> float:
+    """The static sampler's stopping threshold: ``dlogz`` or dynesty's default."""
+    return 1e-3 * (settings.n_live - 1) + 0.01 if settings.dlogz is None else settings.dlogz
+
+
+def final_delta_log_evidence(sampler) -> float:
+    """Remaining Δln Z = ln(Z + L_max X) − ln Z of a finished static dynesty run, where
+    it stopped: the value dynesty compared with ``dlogz`` (Z and the prior volume X at the
+    last dead point, L_max the best final live point; the final live points are the last
+    ``nlive`` entries of the run)."""
+    run = sampler.saved_run
+    last = len(run["logl"]) - sampler.nlive - 1
+    live_max = float(np.max(run["logl"][last + 1 :]))
+    return float(np.logaddexp(0.0, live_max + run["logvol"][last] - run["logz"][last]))
 
 
 def _run_dynesty_quietly(sampler, settings: SamplerSettings, common: dict) -> None:
@@ -601,6 +721,16 @@ def _run_dynesty_quietly(sampler, settings: SamplerSettings, common: dict) -> No
         )
     else:
         sampler.run_nested(dlogz=settings.dlogz, **common)
+
+
+def _restore_dynesty(path: Path, pool):
+    """The dynesty sampler of a checkpoint whose sidecar matched."""
+    try:
+        return dynesty.utils.restore_sampler(str(path), pool=pool)
+    except (OSError, EOFError, RuntimeError) as error:  # dynesty: RuntimeError if corrupt
+        raise CheckpointMismatchError(
+            f"checkpoint {path} is unreadable ({error}); delete it to start afresh"
+        ) from error
 
 
 def _save_dynesty(sampler, path: Path) -> None:
@@ -617,11 +747,15 @@ def _sample_dynesty(
 ) -> SamplerOutput:
     space = evaluation.space
     fingerprint = _fingerprint(space, settings, seed)
+    resume = checkpoint_path is not None and checkpoint_path.exists()
+    if resume:
+        _check_sidecar(checkpoint_path, fingerprint)
+    elif checkpoint_path is not None:
+        write_json(fingerprint_path(checkpoint_path), fingerprint)
     with _evaluating(evaluation, settings.n_processes) as pool:
         stored = {"n_calls": 0, "n_rejected": 0, "runtime": 0.0, "n_resumes": -1}
-        resume = checkpoint_path is not None and checkpoint_path.exists()
         if resume:
-            sampler = dynesty.utils.restore_sampler(str(checkpoint_path), pool=pool)
+            sampler = _restore_dynesty(checkpoint_path, pool)
             stored = getattr(sampler, _STATE_ATTRIBUTE, None)
             if stored is None:
                 raise CheckpointMismatchError(
@@ -645,18 +779,12 @@ def _sample_dynesty(
             setattr(sampler, _STATE_ATTRIBUTE, state)
             progress = _ProgressLine(log, settings.progress_every, state, settings.method)
             checkpoint = None if checkpoint_path is None else str(checkpoint_path)
-            _run_dynesty(sampler, settings, progress, checkpoint, resume, stored["n_calls"])
-            if settings.max_iterations and sampler.results.niter >= settings.max_iterations:
-                log(
-                    f"{settings.method}: WARNING stopped at max_iterations = "
-                    f"{settings.max_iterations} before dlogz was reached: not converged"
-                )
-            if settings.max_calls and evaluation.counts[0] >= settings.max_calls:
-                log(
-                    f"{settings.method}: WARNING stopped at max_calls = {settings.max_calls} "
-                    "before dlogz was reached: not converged"
-                )
-            final = state.snapshot(finished=True)
+            converged, reason = _run_dynesty(
+                sampler, settings, progress, checkpoint, resume, stored["n_calls"]
+            )
+            if not converged:
+                log(f"{settings.method}: WARNING {reason}: not converged")
+            final = {**state.snapshot(finished=True), "converged": converged, "reason": reason}
             if checkpoint_path is not None:
                 setattr(sampler, _STATE_ATTRIBUTE, final)
                 _save_dynesty(sampler, checkpoint_path)
@@ -676,6 +804,8 @@ def _sample_dynesty(
         method=settings.method,
         settings=settings.to_dict(),
         seed=seed,
+        converged=final["converged"],
+        stop_reason=final["reason"],
     )
     log(_summary_line(output))
     return output
@@ -723,16 +853,10 @@ def _sample_nautilus(
     space = evaluation.space
     filepath = _nautilus_checkpoint(checkpoint_path, log)
     if filepath is not None:
-        fingerprint_path = filepath.with_suffix(".fingerprint.json")
         fingerprint = _fingerprint(space, settings, seed)
         if filepath.exists():
-            if not fingerprint_path.exists():
-                raise CheckpointMismatchError(
-                    f"checkpoint {filepath} has no {fingerprint_path.name} to check it against "
-                    "these settings; delete it to start afresh"
-                )
-            _check_fingerprint(filepath, json.loads(fingerprint_path.read_text()), fingerprint)
-        write_json(fingerprint_path, fingerprint)
+            _check_sidecar(filepath, fingerprint)
+        write_json(fingerprint_path(filepath), fingerprint)
     started = time.perf_counter()
     with _evaluating(evaluation, settings.n_processes) as pool:
         sampler = nautilus.Sampler(
@@ -751,19 +875,25 @@ def _sample_nautilus(
         )
         log(f"nautilus: {space.n_free} free parameters, seed {seed}, {sampler.n_like} calls so far")
         cap = math.inf if settings.max_calls is None else settings.max_calls
-        while not sampler.run(
-            f_live=settings.f_live,
-            n_shell=settings.n_shell,
-            n_eff=settings.n_eff,
-            n_like_max=cap,
-            discard_exploration=settings.discard_exploration,
-            timeout=max(settings.progress_every, NAUTILUS_MIN_PROGRESS_INTERVAL),
-            verbose=False,
-        ):
+        options = {
+            "f_live": settings.f_live,
+            "n_shell": settings.n_shell,
+            "n_eff": settings.n_eff,
+            "n_like_max": cap,
+            "discard_exploration": settings.discard_exploration,
+            "timeout": max(settings.progress_every, NAUTILUS_MIN_PROGRESS_INTERVAL),
+            "verbose": False,
+        }
+        converged = sampler.run(**options)
+        while not converged and sampler.n_like < cap:
             log(_nautilus_progress(sampler, time.perf_counter() - started))
-            if sampler.n_like >= cap:
-                log(f"nautilus: WARNING stopped at max_calls = {cap}: not converged")
-                break
+            converged = sampler.run(**options)
+        criteria = f"f_live {settings.f_live}, n_shell {settings.n_shell}, n_eff {settings.n_eff}"
+        if converged:
+            reason = f"stopping criteria reached ({criteria})"
+        else:
+            reason = f"stopped at max_calls = {settings.max_calls} before {criteria} were reached"
+            log(f"nautilus: WARNING {reason}: not converged")
         points, log_w, log_l = sampler.posterior()
         all_log_l = np.concatenate([np.asarray(v, dtype=float) for v in sampler.log_l])
         n_calls = int(sampler.n_like)
@@ -785,6 +915,8 @@ def _sample_nautilus(
         method=settings.method,
         settings=settings.to_dict(),
         seed=seed,
+        converged=converged,
+        stop_reason=reason,
     )
     log(_summary_line(output))
     return output
