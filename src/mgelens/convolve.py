@@ -223,6 +223,18 @@ def _column_boxes(columns, rows, cols):
     return boxes
 
 
+@njit(inline="always")
+def _window_in_frame(origin, n_r, n_c, frame_shape):
+    """Frame rows [r_lo, r_hi) and columns [c_lo, c_hi) of an n_r × n_c window whose
+    top-left corner is at frame position ``origin``."""
+    return (
+        max(origin[0], 0),
+        min(origin[0] + n_r, frame_shape[0]),
+        max(origin[1], 0),
+        min(origin[1] + n_c, frame_shape[1]),
+    )
+
+
 @njit(fastmath=True)
 def _scatter_columns(columns, picked, origins, in_index, full_frame, stack):
     """stack[g] = column ``picked[g]`` of ``columns`` in its window, whose top-left corner
@@ -243,9 +255,7 @@ def _scatter_columns(columns, picked, origins, in_index, full_frame, stack):
         return
     for g in range(picked.size):
         m = picked[g]
-        r_lo, c_lo = max(origins[g, 0], 0), max(origins[g, 1], 0)
-        r_hi = min(origins[g, 0] + n_r, in_index.shape[0])
-        c_hi = min(origins[g, 1] + n_c, in_index.shape[1])
+        r_lo, r_hi, c_lo, c_hi = _window_in_frame(origins[g], n_r, n_c, in_index.shape)
         for r in range(r_lo, r_hi):
             for c in range(c_lo, c_hi):
                 j = in_index[r, c]
@@ -268,9 +278,7 @@ def _gather_columns(full, picked, origins, out_index, full_frame, out):
         return
     for g in range(picked.size):
         m = picked[g]
-        r_lo, c_lo = max(origins[g, 0], 0), max(origins[g, 1], 0)
-        r_hi = min(origins[g, 0] + n_r, out_index.shape[0])
-        c_hi = min(origins[g, 1] + n_c, out_index.shape[1])
+        r_lo, r_hi, c_lo, c_hi = _window_in_frame(origins[g], n_r, n_c, out_index.shape)
         for r in range(r_lo, r_hi):
             for c in range(c_lo, c_hi):
                 p = out_index[r, c]
