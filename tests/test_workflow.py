@@ -28,6 +28,7 @@ from workflow_run import (
 from mgelens import cli
 from mgelens import simulate as sim
 from mgelens.recovery import true_mass_parameters
+from mgelens.sheet import read_sample_sheet
 
 
 def snakemake(*args: str, workdir: Path, timeout: float = 600) -> subprocess.CompletedProcess:
@@ -51,8 +52,10 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert counts["simulate_mock"] == 3
     assert counts["preview"] == 3
     # the default target is the whole DAG: five phases and isophotes per lens, summary
-    assert counts["phase"] == 12  # SP, SPix2, LIGHT, MASS
+    assert counts["phase"] == 9  # SP, SPix2, MASS
     assert counts["phase_spix1"] == 3  # SPix1, which also writes the adapt image
+    assert counts["phase_light"] == 3  # the sheet pins M1-M3's LIGHT model
+    assert "choose_light" not in counts
     assert counts["isophotes"] == 3
     assert counts["recovery"] == 3
     assert counts["recovery_table"] == 1
@@ -66,8 +69,8 @@ def test_dry_run_of_one_lens_slam_chain_runs_five_phases(tmp_path):
     assert result.returncode == 0, result.stderr
     output = result.stdout + result.stderr
     counts = job_counts(output)
-    assert counts["phase"] == 4
-    assert counts["phase_spix1"] == 1
+    assert counts["phase"] == 3
+    assert counts["phase_spix1"] == counts["phase_light"] == 1
     assert counts["simulate_mock"] == 1
     for phase in ("sp", "spix1", "spix2", "light", "mass"):
         assert f"mgelens phase {phase} " in output
@@ -262,7 +265,8 @@ def test_config_schema_fills_the_paper_defaults():
     ("row", "message"),
     [
         ("X1\tmock\tM7\t\t1.8\t4\tyes\t0.2\t0.6", "'M7' does not match"),
-        ("X1\tmock\tM1\t\t1.8\t3\tyes\t0.2\t0.6", "3 is not one of [2, 4, 6]"),
+        ("X1\tmock\tM1\t\t1.8\t3\tyes\t0.2\t0.6", "3 is not valid under any of the given schemas"),
+        ("X1\tmock\tM1\t\t1.8\tmany\tyes\t0.2\t0.6", "'many' is not valid under any of the given"),
         ("X1\tmock\t\t\t1.8\t4\tyes\t0.2\t0.6", "'mock' is a required property"),
         ("X1\treal\t\t\t1.8\t4\tyes\t0.2\t0.6", "'input' is a required property"),
         ("X1\treal\tM1\tdir\t1.8\t4\tyes\t0.2\t0.6", "should not be valid"),
@@ -276,13 +280,13 @@ def test_config_schema_fills_the_paper_defaults():
 def test_sample_sheet_schema_rejects_bad_rows(tmp_path, row, message):
     header = SHEET_HEADER if row.count("\t") == 8 else SHEET_HEADER.replace("\n", "\tnoise_seed\n")
     (tmp_path / "sheet.tsv").write_text(header + row + "\n")
-    sheet = pd.read_csv(tmp_path / "sheet.tsv", sep="\t", dtype={"mock": str, "input": str})
+    sheet = read_sample_sheet(tmp_path / "sheet.tsv")
     with pytest.raises(WorkflowError) as error:
         validate(sheet, str(SCHEMAS / "lenses.schema.yaml"))
     assert message in str(error.value)
 
 
-@pytest.mark.parametrize("sheet", ["lenses.tsv", "population.tsv", "slacs.tsv"])
+@pytest.mark.parametrize("sheet", ["lenses.tsv", "population.tsv", "slacs.tsv", "paper.tsv"])
 def test_shipped_sample_sheets_are_valid(sheet):
     validate(read_sheet(sheet), str(SCHEMAS / "lenses.schema.yaml"))
 
@@ -304,7 +308,7 @@ def test_conda_environment_of_the_rules_mirrors_pyproject():
 
 
 def read_sheet(name: str) -> pd.DataFrame:
-    return pd.read_csv(ROOT / "config" / name, sep="\t", dtype={"mock": str, "input": str})
+    return read_sample_sheet(ROOT / "config" / name).reset_index(drop=True)
 
 
 def test_sample_sheets_agree_with_the_mock_recipes():
@@ -333,6 +337,73 @@ def test_slacs_sheet_lists_every_shared_lens_with_its_redshifts(slacs_dir):
     for _, row in sheet.iterrows():
         info = json.loads((slacs_dir / row["input"] / "info.json").read_text())
         assert (row["z_lens"], row["z_source"]) == (info["z_lens"], info["z_source"])
+
+
+def test_paper_sheet_is_the_pyautolens_groups_41_lenses_with_boltons_redshifts(slacs_dir):
+    reference = slacs_dir.parent / "reference"
+    if not reference.is_dir():
+        pytest.skip(f"published reference tables absent: expected {reference}")
+    sheet = read_sheet("paper.tsv").set_index("lens")
+    etherington = pd.read_csv(reference / "etherington_slacs_data_table.csv")
+    assert sorted(sheet.index) == sorted(etherington["lens_name"])
+    assert len(sheet) == 41
+    bolton = pd.read_csv(reference / "bolton2008_table4_table5.csv").set_index("Name1")
+    for lens, row in sheet.iterrows():
+        published = bolton.loc["J" + lens.removeprefix("slacs")]
+        assert (row["z_lens"], row["z_source"]) == (published["zFG1"], published["zBG1"])
+        assert (slacs_dir / row["input"] / "data.fits").is_file()
+    assert (sheet["mge_sets"] == "auto").all()
+    assert (sheet["point_set"] == "auto").all()
+
+
+def test_light_models_chosen_by_evidence_and_a_sheet_pixel_scale(tmp_path):
+    """`auto` rows fit each candidate LIGHT into its folder and choose among them; pinned
+    rows fit LIGHT once; a `pixel_scale` cell reaches every phase and the preview."""
+    from mgelens.imaging import Imaging
+
+    shape = (41, 41)
+    psf = np.zeros((3, 3))
+    psf[1, 1] = 1.0
+    for lens in ("A", "B", "C"):
+        Imaging(np.zeros(shape), np.ones(shape), psf, 0.05).to_fits(tmp_path / "data" / lens)
+    rows = [
+        "A\treal\t\tA\t0.8\tauto\tauto\t0.2\t0.6\t",
+        "B\treal\t\tB\t0.8\t2\tauto\t0.2\t0.6\t0.05",
+        "C\treal\t\tC\t0.8\t4\tno\t0.2\t0.6\t",
+    ]
+    header = SHEET_HEADER.replace("\n", "\tpixel_scale\n")
+    (tmp_path / "sheet.tsv").write_text(header + "\n".join(rows) + "\n")
+    config = tmp_path / "config.yaml"
+    config.write_text(
+        f"samples: {tmp_path / 'sheet.tsv'}\ndata_dir: {tmp_path / 'data'}\n"
+        "model_choice_threshold: 3.5\n"
+    )
+    targets = [f"results/{lens}/mass/result.json" for lens in "ABC"]
+    result = snakemake(
+        *targets, "results/B/figures/preview.png", "-n", "-p", "--configfile", str(config),
+        workdir=tmp_path,
+    )  # fmt: skip
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    counts = job_counts(output)
+    assert counts["light_candidate"] == 3 + 2
+    assert counts["choose_light"] == 2
+    assert counts["phase_light"] == 1
+    for folder, options in [
+        ("light_x2_point", "--mge-sets 2 --point-set yes"),
+        ("light_x6_point", "--mge-sets 6 --point-set yes"),
+        ("light_x2", "--mge-sets 2 --point-set no"),
+    ]:
+        assert f"mgelens phase light --lens-dir {tmp_path / 'data' / 'A'} " in output
+        assert f"{options} --folder {folder} --seed 0" in output
+    assert "--candidates X2+point X6+point X2 --threshold 3.5" in output
+    assert "--results results/B --candidates X2+point X2 --threshold 3.5" in output
+    assert "--results results/C --threads 1 --mask-radius 0.8 --mge-sets 4 --point-set no" in output
+    # B's pixel scale: SP, SPix1, SPix2, two LIGHT candidates, MASS, and the preview
+    assert output.count("--pixel-scale 0.05") == 7
+    # the candidates of a lens are LIGHT phases with its priority
+    priorities = dict(re.findall(r"phase=(light\w*)\n\s+priority: (\d+)", output))
+    assert set(priorities.values()) == {"2"}
 
 
 def test_preview_of_a_real_lens(tmp_path, slacs_dir):

@@ -54,7 +54,17 @@ def read_sample_sheet(path: str | Path) -> pd.DataFrame:
     duplicated = sheet["lens"][sheet["lens"].duplicated()].tolist()
     if duplicated:
         raise SheetError(f"{path}: lens ids must be unique, repeated: {duplicated}")
+    if "mge_sets" in sheet.columns and not pd.api.types.is_numeric_dtype(sheet["mge_sets"]):
+        sheet["mge_sets"] = sheet["mge_sets"].map(_integer_or_word).astype(object)
     return sheet.set_index("lens", drop=False)
+
+
+def _integer_or_word(cell):
+    """A cell of a column mixing integers and words (``mge_sets``: 2 or ``auto``) as an
+    int where it is written as one, else as written; pandas reads such a column as text."""
+    if isinstance(cell, str) and cell.strip().isdigit():
+        return int(cell)
+    return cell
 
 
 def check_row_widths(path: Path, text: str) -> None:

@@ -15,6 +15,7 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
 from mgelens.imaging import INFO_FILE, MASK_FILE
+from mgelens.pipeline.model_choice import candidates as light_candidates
 from mgelens.provenance import code_version
 from mgelens.pipeline.settings import SettingsError, settings_from_mapping
 from mgelens.sheet import SheetError, read_sample_sheet
@@ -25,7 +26,7 @@ try:  # stop before building the DAG if the slam: section is wrong, naming the k
     settings_from_mapping(config["slam"], origin="config")
 except SettingsError as error:
     raise WorkflowError(str(error)) from None
-SHEET_SETTINGS = ("mask_radius", "mge_sets", "point_set")
+SHEET_SETTINGS = ("mask_radius", "pixel_scale", "mge_sets", "point_set")
 """slam: fields that the sample sheet sets per lens (columns of the same names)."""
 _sheet_keys = [key for key in SHEET_SETTINGS if key in config["slam"]]
 if _sheet_keys:
@@ -148,6 +149,15 @@ def imaging_files(wildcards) -> dict:
     return files
 
 
+def pixel_scale_option(wildcards) -> str:
+    """` --pixel-scale <arcsec>` from the sheet's `pixel_scale` column, if the lens has one
+    (a folder without info.json whose data header has no pixel scale); else ``""``."""
+    row = lens_row(wildcards.lens)
+    if "pixel_scale" not in row or pd.isna(row["pixel_scale"]):
+        return ""
+    return f" --pixel-scale {row['pixel_scale']}"
+
+
 def preview_inputs(wildcards) -> dict:
     """Files the preview of a lens reads: the imaging, plus the truth of a mock."""
     files = imaging_files(wildcards)
@@ -210,17 +220,39 @@ def all_targets() -> list[str]:
 # SLaM phases (workflow/rules/slam.smk)
 
 PHASES = ["sp", "spix1", "spix2", "light", "mass"]
+LIGHT_FOLDERS = "light_x[0-9]+(?:_point)?"
+"""Folders of LIGHT candidates (mgelens.pipeline.model_choice.LightModel.folder)."""
 
 
 wildcard_constraints:
-    phase="|".join(PHASES),
+    phase=f"{'|'.join(PHASES)}|{LIGHT_FOLDERS}",
+
+
+def lens_light_models(lens: str):
+    """The LIGHT models of a lens: one if its sheet row pins `mge_sets` and `point_set`,
+    else the candidates that rule choose_light compares (mgelens.pipeline.model_choice)."""
+    row = lens_row(lens)
+    return light_candidates(row["mge_sets"], row["point_set"])
+
+
+CHOSEN_LIGHT_LENSES = [lens for lens in LENSES.index if len(lens_light_models(lens)) > 1]
+"""Lenses whose LIGHT model is chosen by evidence (a sheet row with `auto`)."""
+CHOSEN_LIGHT = (
+    f"(?:{'|'.join(re.escape(lens) for lens in CHOSEN_LIGHT_LENSES)})"
+    if CHOSEN_LIGHT_LENSES
+    else "(?!)"
+)
+"""Lens ids of rules light_candidate and choose_light; rule phase_light takes the others."""
+PINNED_LIGHT = other_than(CHOSEN_LIGHT_LENSES)
 
 
 def phase_inputs(wildcards) -> dict:
     """Imaging files of the lens, the result files of the phases before this one and, after
-    SPix1, SPix1's adapt image."""
+    SPix1, SPix1's adapt image. A LIGHT candidate (`light_x<n>[_point]`) needs what LIGHT
+    needs."""
     files = imaging_files(wildcards)
-    earlier = PHASES[: PHASES.index(wildcards.phase)]
+    phase = "light" if wildcards.phase.startswith("light") else wildcards.phase
+    earlier = PHASES[: PHASES.index(phase)]
     for name in earlier:
         files[name] = f"results/{wildcards.lens}/{name}/result.json"
     if "spix1" in earlier:
@@ -228,14 +260,39 @@ def phase_inputs(wildcards) -> dict:
     return files
 
 
-def phase_options(wildcards) -> str:
-    """Per-lens CLI options from the sample sheet: the mask radius, and for LIGHT (the only
-    phase that reads them) the MGE sets and point set; then the config's sampler seed."""
-    row = lens_row(wildcards.lens)
-    options = f"--mask-radius {row['mask_radius']}"
+def light_model_of(wildcards):
+    """The LIGHT model a `phase` wildcard stands for: a candidate folder's, or the pinned one."""
+    models = lens_light_models(wildcards.lens)
     if wildcards.phase == "light":
-        options += f" --mge-sets {row['mge_sets']} --point-set {row['point_set']}"
+        return models[0]
+    return next(m for m in models if m.folder == wildcards.phase)
+
+
+def phase_options(wildcards) -> str:
+    """Per-lens CLI options from the sample sheet: the mask radius and pixel scale, and for
+    LIGHT (the only phase that reads them) the MGE sets and point set of the pinned model
+    or of the candidate; then the config's sampler seed."""
+    row = lens_row(wildcards.lens)
+    options = f"--mask-radius {row['mask_radius']}{pixel_scale_option(wildcards)}"
+    if wildcards.phase.startswith("light"):
+        model = light_model_of(wildcards)
+        point = "yes" if model.point_set else "no"
+        options += f" --mge-sets {model.mge_sets} --point-set {point}"
+        if wildcards.phase != "light":
+            options += f" --folder {wildcards.phase}"
     return options + f" --seed {config['sampler_seed']}"
+
+
+def light_candidate_results(wildcards) -> list[str]:
+    """result.json of each LIGHT candidate of a lens (rule choose_light)."""
+    return [
+        f"results/{wildcards.lens}/{model.folder}/result.json"
+        for model in lens_light_models(wildcards.lens)
+    ]
+
+
+def light_candidate_labels(wildcards) -> str:
+    return " ".join(model.label for model in lens_light_models(wildcards.lens))
 
 
 def phase_settings(wildcards) -> str:
@@ -243,15 +300,21 @@ def phase_settings(wildcards) -> str:
     that changing one phase's sampler reruns that phase (and the phases after it) only."""
     section = dict(config["slam"])
     samplers = section.pop("samplers", None) or {}
-    if wildcards.phase in samplers:
-        section["samplers"] = {wildcards.phase: samplers[wildcards.phase]}
+    phase = phase_name(wildcards)
+    if phase in samplers:
+        section["samplers"] = {phase: samplers[phase]}
     return json.dumps(section, sort_keys=True)
+
+
+def phase_name(wildcards) -> str:
+    """The SLaM phase a `phase` wildcard runs: `light` for a LIGHT candidate's folder."""
+    return "light" if wildcards.phase.startswith("light") else wildcards.phase
 
 
 def phase_priority(wildcards) -> int:
     """Earlier phases first (SP highest): with more lenses than cores, every lens's SP, the
     longest phase, starts before any chain's later phases, so no late SP sets the tail."""
-    return len(PHASES) - PHASES.index(wildcards.phase)
+    return len(PHASES) - PHASES.index(phase_name(wildcards))
 
 
 def phase_mem_mb(wildcards, attempt) -> int:

@@ -18,6 +18,7 @@ rule preview:
     params:
         mgelens_version=MGELENS_VERSION,
         folder=lens_imaging_folder,
+        pixel_scale=pixel_scale_option,
     threads: 1
     resources:
         mem_mb=preview_mem_mb,
@@ -25,4 +26,5 @@ rule preview:
     conda:
         "../envs/mgelens.yaml"
     shell:
-        "mgelens preview {params.folder:q} --out {output:q} --threads {threads} > {log:q} 2>&1"
+        "mgelens preview {params.folder:q} --out {output:q}{params.pixel_scale} "
+        "--threads {threads} > {log:q} 2>&1"

@@ -6,6 +6,11 @@ A phase reads only earlier phases' folders, so deleting one result reruns just t
 lenses at a time; the config's `slam:` section goes to every phase (`--slam`) with only
 that phase's sampler settings, and changing it reruns the phases. SPix1 also writes the
 adapt image that SPix2, LIGHT and MASS read (rule `phase_spix1`).
+
+LIGHT: a lens whose sheet row pins `mge_sets` and `point_set` fits it once (rule
+`phase_light`). A row with `auto` fits each candidate model into `light_<model>/` (rule
+`light_candidate`); rule `choose_light` keeps the one the Bayesian evidence prefers,
+copies it into `light/`, which MASS reads, and writes `model_choice.json`.
 """
 
 rule phase:
@@ -16,13 +21,14 @@ rule phase:
         samples="results/{lens}/{phase}/samples.csv",
         model="results/{lens}/{phase}/model.fits",
     wildcard_constraints:
-        phase="sp|spix2|light|mass",
+        phase="sp|spix2|mass",
     log:
         "logs/{lens}/{phase}.log",
     benchmark:
         "results/{lens}/benchmarks/{phase}.tsv"
     params:
         mgelens_version=MGELENS_VERSION,
+        phase=phase_name,
         lens_dir=lens_imaging_folder,
         options=phase_options,
         slam=phase_settings,
@@ -35,7 +41,7 @@ rule phase:
     conda:
         "../envs/mgelens.yaml"
     shell:
-        "mgelens phase {wildcards.phase} --lens-dir {params.lens_dir:q} "
+        "mgelens phase {params.phase} --lens-dir {params.lens_dir:q} "
         "--results results/{wildcards.lens} --threads {threads} {params.options} "
         "--slam {params.slam:q} "
         "> {log:q} 2>&1"
@@ -49,3 +55,44 @@ use rule phase as phase_spix1 with:
         adapt_image="results/{lens}/{phase}/adapt_image.fits",
     wildcard_constraints:
         phase="spix1",
+
+
+use rule phase as phase_light with:
+    wildcard_constraints:
+        phase="light",
+        lens=PINNED_LIGHT,
+
+
+use rule phase as light_candidate with:
+    wildcard_constraints:
+        phase=LIGHT_FOLDERS,
+        lens=CHOSEN_LIGHT,
+
+
+rule choose_light:
+    input:
+        light_candidate_results,
+    output:
+        result="results/{lens}/light/result.json",
+        samples="results/{lens}/light/samples.csv",
+        model="results/{lens}/light/model.fits",
+        choice="results/{lens}/model_choice.json",
+    wildcard_constraints:
+        lens=CHOSEN_LIGHT,
+    log:
+        "logs/{lens}/choose_light.log",
+    benchmark:
+        "results/{lens}/benchmarks/choose_light.tsv"
+    params:
+        mgelens_version=MGELENS_VERSION,
+        candidates=light_candidate_labels,
+        threshold=config["model_choice_threshold"],
+    threads: 1
+    resources:
+        mem_mb=500,
+        runtime=5,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens choose --results results/{wildcards.lens} --candidates {params.candidates} "
+        "--threshold {params.threshold} --record {output.choice:q} > {log:q} 2>&1"

@@ -12,7 +12,8 @@ The phase reads the imaging of ``--lens-dir`` and the earlier phases' folders un
 phase.log; spix1 also adapt_image.fits). Settings: the ``--profile`` defaults ("quick"
 unless the ``slam:`` settings say otherwise), then the ``slam:`` section of ``--config``,
 then ``--slam`` (the same content as JSON; the workflow passes its config's section this
-way), then the per-lens options ``--mask-radius``, ``--mge-sets``, ``--point-set``.
+way), then the per-lens options ``--mask-radius``, ``--pixel-scale``, ``--mge-sets``,
+``--point-set``.
 """
 
 import argparse
@@ -50,6 +51,12 @@ def register(subparsers) -> None:
         required=True,
         help="results folder of the lens (one sub-folder per phase)",
     )
+    parser.add_argument(
+        "--folder",
+        metavar="NAME",
+        help="phase folder under --results (default: the phase's name); the workflow "
+        "writes each candidate LIGHT model to light_<model>",
+    )
     parser.add_argument("--config", type=Path, help="YAML file with a `slam:` settings section")
     parser.add_argument(
         "--slam",
@@ -62,6 +69,11 @@ def register(subparsers) -> None:
     parser.add_argument("--threads", type=int, default=1, help="numba/BLAS threads (default 1)")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     parser.add_argument("--mask-radius", type=float, help="mask radius in arcsec")
+    parser.add_argument(
+        "--pixel-scale",
+        type=float,
+        help="arcsec per image pixel (default: the folder's info.json, else the data header)",
+    )
     parser.add_argument(
         "--mge-sets", type=int, choices=(2, 4, 6), help="MGE sets of the light phase"
     )
@@ -77,11 +89,15 @@ def run(args: argparse.Namespace) -> int:
         keep_freed_memory()
         settings = load_settings(args.config, args.profile, args.slam).with_overrides(
             mask_radius=args.mask_radius,
+            pixel_scale=args.pixel_scale,
             mge_sets=args.mge_sets,
             point_set=None if args.point_set is None else args.point_set == "yes",
         )
-        make_output_folders(args.results / args.phase / RESULT_FILE)
-        phases.run_phase(args.phase, args.lens_dir, args.results, settings, seed=args.seed)
+        folder = args.folder or args.phase
+        make_output_folders(args.results / folder / RESULT_FILE)
+        phases.run_phase(
+            args.phase, args.lens_dir, args.results, settings, seed=args.seed, folder_name=folder
+        )
     except (SettingsError, ImagingError, phases.PhaseInputError, ValueError, OSError) as error:
         logger.error("phase %s: %s", args.phase, error)
         return 1

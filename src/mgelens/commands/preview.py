@@ -47,6 +47,11 @@ def register(subparsers) -> None:
     )
     parser.add_argument("folder", metavar="DIR", help="imaging folder (mock or real)")
     parser.add_argument("--out", required=True, metavar="PNG", help="output PNG file")
+    parser.add_argument(
+        "--pixel-scale",
+        type=float,
+        help="arcsec per pixel (default: the folder's info.json, else the data header)",
+    )
     add_threads_argument(parser)
     parser.set_defaults(func=run)
 
@@ -54,7 +59,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     limit_threads(args.threads)
     try:
-        figure = preview_figure(args.folder)
+        figure = preview_figure(args.folder, args.pixel_scale)
         with atomic_path(args.out) as temporary:
             figure.savefig(temporary, format="png", dpi=DPI)
     except (ValueError, OSError) as error:
@@ -64,10 +69,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def preview_figure(folder: str | Path) -> Figure:
-    """The preview figure of an imaging folder (see the module docstring)."""
+def preview_figure(folder: str | Path, pixel_scale: float | None = None) -> Figure:
+    """The preview figure of an imaging folder (see the module docstring); ``pixel_scale``
+    (arcsec) as in :meth:`~mgelens.imaging.Imaging.from_folder`."""
     folder = Path(folder)
-    imaging = Imaging.from_folder(folder)
+    imaging = Imaging.from_folder(folder, pixel_scale=pixel_scale)
     truth_path = folder / MOCK_FILES["truth"]
     if truth_path.is_file():
         return _mock_figure(folder, imaging, json.loads(truth_path.read_text()))

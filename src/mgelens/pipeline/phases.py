@@ -225,7 +225,7 @@ def load_dataset(
     radius = resolve_mask_radius(lens_dir, settings)
     data_file = lens_dir / DATA_FILE
     circle = functools.partial(_fit_circle, data_file, radius, settings.mask_centre)
-    imaging = Imaging.from_folder(lens_dir, mask_from=circle)
+    imaging = Imaging.from_folder(lens_dir, pixel_scale=settings.pixel_scale, mask_from=circle)
     mask = imaging.mask
     fittable.check_signal(data_file, imaging, mask, radius)
     fit_settings = FitSettings(
@@ -852,6 +852,7 @@ def run_phase(
     settings: SlamSettings,
     seed: int = 0,
     threads: int | None = None,
+    folder_name: str | None = None,
 ) -> PhaseResult:
     """Run phase ``name`` of the lens in ``lens_dir``; write ``results_dir/<name>/``.
 
@@ -868,6 +869,10 @@ def run_phase(
         Seed of the sampler.
     threads : int, optional
         numba / BLAS threads (:func:`limit_threads`); ``None`` leaves them as they are.
+    folder_name : str, optional
+        Write ``results_dir/<folder_name>/`` instead: a candidate LIGHT model
+        (:mod:`mgelens.pipeline.model_choice`). Earlier phases are always read from
+        their own folders.
 
     Returns
     -------
@@ -875,10 +880,14 @@ def run_phase(
     """
     if name not in PROBLEMS:
         raise ValueError(f"unknown phase {name!r}; phases are {list(PHASES)}")
+    if folder_name is not None and (
+        Path(folder_name).name != folder_name or folder_name in ("", ".", "..")
+    ):
+        raise ValueError(f"phase folder {folder_name!r} must be one folder name, not a path")
     if threads is not None:
         limit_threads(threads)
     lens_dir, results_dir = Path(lens_dir), Path(results_dir)
-    folder = results_dir / name
+    folder = results_dir / (folder_name or name)
     folder.mkdir(parents=True, exist_ok=True)
     with _phase_log(folder):
         runs = chain_settings(name, settings)

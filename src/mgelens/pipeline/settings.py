@@ -73,6 +73,11 @@ class SlamSettings:
         lens folder's ``truth.json`` (mocks). The MGE σ grid runs from Δ/5 to this radius.
     mask_centre : (float, float)
         Mask centre (x, y) in arcsec; also the centre of the SP lens-light and mass priors.
+    pixel_scale : float or None
+        Arcsec per image pixel; ``None`` takes it from the imaging folder (``info.json``,
+        else the data header's ``PIXSCALE`` or celestial WCS). A value here wins over both,
+        with a warning if the header differs (:meth:`~mgelens.imaging.Imaging.from_folder`).
+        The workflow sets it per lens from the sample sheet's ``pixel_scale`` column.
     positive_only : bool
         Non-negative solve of all linear unknowns ("nn-MGE", default) or unconstrained
         ("pn-MGE"), in every phase.
@@ -154,6 +159,7 @@ class SlamSettings:
     profile: str = "quick"
     mask_radius: float | None = None
     mask_centre: tuple[float, float] = (0.0, 0.0)
+    pixel_scale: float | None = None
     positive_only: bool = True
     lens_light_model: str = "mge"
     mge_sets: int = 4
@@ -225,6 +231,10 @@ def _checked_fields(settings: SlamSettings) -> dict:
     if settings.mask_radius is not None:
         checked["mask_radius"] = values.number(
             "slam.mask_radius", settings.mask_radius, 0.0, open_minimum=True
+        )
+    if settings.pixel_scale is not None:
+        checked["pixel_scale"] = values.number(
+            "slam.pixel_scale", settings.pixel_scale, 0.0, open_minimum=True
         )
     checked["mask_centre"] = values.pair(
         "slam.mask_centre", settings.mask_centre, values.number, "two numbers (x, y) in arcsec"

@@ -1,0 +1,188 @@
+"""Choice of the LIGHT phase's lens-light model by Bayesian evidence (paper §5).
+
+A lens whose sample sheet says ``auto`` for ``mge_sets`` or ``point_set`` has its LIGHT
+phase fitted once per candidate model, from the same SP, SPix1 and SPix2, each into
+``<results>/light_<model>/`` (:attr:`LightModel.folder`). :func:`choose` picks one by the
+sampler's Bayesian log evidence ln Z (SPEC §7: ln ε marginalised over the phase's
+non-linear parameters), and :func:`adopt` copies the chosen candidate's files into
+``<results>/light/``, which MASS reads as for a lens with a pinned model.
+
+The rule: take the simplest candidate whose ln Z is within ``threshold`` of the highest
+ln Z, "simplest" meaning fewest linear unknowns (then fewest free parameters). A more
+complex model is taken only if it beats every simpler one by at least ``threshold``
+(default :data:`DEFAULT_THRESHOLD` = 5, odds of e⁵ ≈ 150 : 1, "strong" on Jeffreys'
+scale). The MGE amplitudes carry no prior (SPEC §7), so extra Gaussians pay no Occam
+penalty of their own in ln ε; the threshold is what keeps a model with three times the
+linear unknowns from winning on noise.
+
+``model_choice.json`` records every candidate (label, ln Z and its error, the ln ε, ln L
+and χ² of its maximum-likelihood fit, linear unknowns, free parameters, convergence),
+the threshold, the rule and ``chosen``.
+"""
+
+import json
+import re
+import shutil
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from mgelens.atomic import atomic_path, write_json
+from mgelens.search.results import RESULT_FILE, SAMPLES_FILE
+
+DEFAULT_THRESHOLD = 5.0
+"""ln Z by which a more complex LIGHT model must beat every simpler candidate."""
+
+AUTO = "auto"
+"""Sample-sheet value of ``mge_sets`` / ``point_set`` that asks for a choice."""
+
+AUTO_MGE_SETS = (2, 6)
+"""Extended-set counts tried when ``mge_sets`` is ``auto`` (the paper's X2 and X6)."""
+
+CHOICE_FILE = "model_choice.json"
+PHASE_FILES = (RESULT_FILE, SAMPLES_FILE, "model.fits", "phase.log")
+"""Files of a LIGHT candidate's folder copied into ``light/`` (the log if present)."""
+
+_LABEL = re.compile(r"^X([1-9][0-9]*)(\+point)?$")
+
+
+@dataclass(frozen=True)
+class LightModel:
+    """A lens-light model of the LIGHT phase: ``mge_sets`` extended 30-Gaussian sets, with
+    or without the 10-Gaussian central point set (SPEC §2.4)."""
+
+    mge_sets: int
+    point_set: bool
+
+    @property
+    def label(self) -> str:
+        """``X<n>+point`` or ``X<n>`` (the paper's names, e.g. ``X6+point``)."""
+        return f"X{self.mge_sets}" + ("+point" if self.point_set else "")
+
+    @property
+    def folder(self) -> str:
+        """Phase folder of this candidate: ``light_x<n>_point`` or ``light_x<n>``."""
+        return f"light_x{self.mge_sets}" + ("_point" if self.point_set else "")
+
+    @classmethod
+    def from_label(cls, label: str) -> "LightModel":
+        """Parse :attr:`label`; ValueError naming the accepted form otherwise."""
+        match = _LABEL.match(label)
+        if match is None:
+            raise ValueError(f"light model {label!r} is not of the form X<n> or X<n>+point")
+        return cls(int(match.group(1)), match.group(2) is not None)
+
+
+def candidates(mge_sets: int | str, point_set: str) -> tuple[LightModel, ...]:
+    """The LIGHT models to compare for a sheet row's ``mge_sets`` and ``point_set``.
+
+    ``auto`` in both gives the paper's three, X2+point, X6+point and X2; ``auto`` in one
+    varies that one only (e.g. ``mge_sets`` 2 and ``point_set`` auto: X2+point, X2). With
+    neither ``auto`` the one pinned model is returned.
+    """
+    if mge_sets == AUTO and point_set == AUTO:
+        return (LightModel(2, True), LightModel(6, True), LightModel(2, False))
+    sets = AUTO_MGE_SETS if mge_sets == AUTO else (int(mge_sets),)
+    points = (True, False) if point_set == AUTO else (point_set == "yes",)
+    return tuple(LightModel(n, p) for p in points for n in sets)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A finished LIGHT candidate as read from its folder's ``result.json``.
+
+    ``log_evidence`` (ln Z) and its error are the sampler's; ``max_log_evidence``,
+    ``max_log_likelihood`` and ``chi_squared`` are those of the maximum-likelihood fit
+    (ln ε, ln L and χ² of SPEC §7); ``n_linear`` counts the solved lens-light amplitudes
+    and source pixels.
+    """
+
+    label: str
+    log_evidence: float
+    log_evidence_error: float
+    max_log_evidence: float
+    max_log_likelihood: float
+    chi_squared: float
+    n_linear: int
+    n_free: int
+    converged: bool
+
+    @classmethod
+    def read(cls, folder: str | Path, model: LightModel) -> "Candidate":
+        """The candidate ``model`` whose LIGHT phase is in ``folder``."""
+        path = Path(folder) / RESULT_FILE
+        if not path.is_file():
+            raise FileNotFoundError(
+                f"{path} not found: run the LIGHT candidate {model.label} first "
+                f"(mgelens phase light --folder {model.folder} ...)"
+            )
+        try:
+            result = json.loads(path.read_text())
+            record = result["max_likelihood_fit"]
+            amplitudes = sum(
+                len(c.get("intensities", ()))
+                for c in record["lens_light"]["components"]
+                if not c.get("fixed", False)
+            )
+            return cls(
+                label=model.label,
+                log_evidence=float(result["log_evidence"]),
+                log_evidence_error=float(result["log_evidence_error"]),
+                max_log_evidence=float(record["log_evidence"]),
+                max_log_likelihood=float(record["log_likelihood"]),
+                chi_squared=float(record["chi_squared"]),
+                n_linear=amplitudes + int(record["source"].get("n_pixels", 0)),
+                n_free=sum(p["status"] == "free" for p in result["parameter_space"]["parameters"]),
+                converged=bool(result["converged"]),
+            )
+        except (json.JSONDecodeError, KeyError, TypeError) as error:
+            raise ValueError(
+                f"{path} is not a finished phase's result ({type(error).__name__}: {error}); "
+                f"delete {path.parent} and rerun the LIGHT candidate {model.label}"
+            ) from None
+
+
+def choose(found: Sequence[Candidate], threshold: float = DEFAULT_THRESHOLD) -> Candidate:
+    """The simplest candidate whose ln Z is within ``threshold`` of the highest.
+
+    Simplest = fewest linear unknowns, then fewest free parameters (module docstring).
+    """
+    if not found:
+        raise ValueError("no LIGHT candidate to choose from")
+    if not threshold >= 0.0:
+        raise ValueError(f"model-choice threshold must be a number >= 0, got {threshold!r}")
+    best = max(c.log_evidence for c in found)
+    eligible = [c for c in found if c.log_evidence >= best - threshold]
+    return min(eligible, key=lambda c: (c.n_linear, c.n_free))
+
+
+def adopt(
+    results_dir: str | Path,
+    models: Sequence[LightModel],
+    threshold: float = DEFAULT_THRESHOLD,
+    record_path: str | Path | None = None,
+) -> Candidate:
+    """Choose among the LIGHT candidates ``models`` of ``results_dir`` and adopt the
+    winner: its folder's files (:data:`PHASE_FILES`) are copied, each atomically, into
+    ``results_dir/light/``; the choice is written to ``record_path`` (default
+    ``results_dir/model_choice.json``). Returns the chosen candidate."""
+    results_dir = Path(results_dir)
+    found = [Candidate.read(results_dir / m.folder, m) for m in models]
+    chosen = choose(found, threshold)
+    source = results_dir / LightModel.from_label(chosen.label).folder
+    for name in PHASE_FILES:
+        if (source / name).is_file():
+            with atomic_path(results_dir / "light" / name) as temporary:
+                shutil.copyfile(source / name, temporary)
+    write_json(
+        results_dir / CHOICE_FILE if record_path is None else record_path,
+        {
+            "chosen": chosen.label,
+            "criterion": "log_evidence",
+            "threshold": threshold,
+            "rule": "the candidate with the fewest linear unknowns (then free parameters) "
+            "whose ln Z is within `threshold` of the highest ln Z",
+            "candidates": [asdict(c) for c in found],
+        },
+    )
+    return chosen
