@@ -1,8 +1,10 @@
 """Sample histograms of the isophote statistics (the paper's three panels).
 
 Panels: Δq_max, ΔPA_max (degrees) and max |a₄/a| over 0.5″ ≤ a ≤ 2.5″, one entry per lens
-of a :func:`mgelens.summary.sample_table`; the complexity thresholds are drawn as dashed
-lines and the fraction of complex lenses is given in the title.
+of a :func:`mgelens.summary.sample_table`; the complexity thresholds and |a₄/a| = 0.02 are
+drawn as dashed lines. The title gives the fraction of complex lenses and the a₄ panel the
+fraction below 0.02, each next to the paper's (SPEC §11: ≈ 40 % of 35 complex, 32 of 35
+with max |a₄/a| < 0.02).
 """
 
 import numpy as np
@@ -11,6 +13,13 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from mgelens.summary import DELTA_PA_THRESHOLD, DELTA_Q_THRESHOLD, complex_fraction
+
+A4_THRESHOLD = 0.02
+"""max |a₄/a| below which the paper counts a lens as neither boxy nor disky."""
+PAPER_COMPLEX_FRACTION = 0.40
+"""The paper's fraction of complex lenses (Δq_max > 0.1 or ΔPA_max > 10°), of 35."""
+PAPER_A4_BELOW = (32, 35)
+"""The paper's lenses with max |a₄/a| < :data:`A4_THRESHOLD`, of those measured."""
 
 PANELS = (
     ("delta_q_max", "max Δq"),
@@ -51,7 +60,7 @@ def histogram_figure(
     """
     figure = Figure(figsize=(11.0, 3.6), layout="constrained")
     axes = figure.subplots(1, 3)
-    thresholds = (delta_q_threshold, delta_pa_threshold, None)
+    thresholds = (delta_q_threshold, delta_pa_threshold, A4_THRESHOLD)
     for ax, (column, label), threshold in zip(axes, PANELS, thresholds, strict=True):
         _histogram(ax, table[column].to_numpy(dtype=float), label, threshold)
     measured = int(np.count_nonzero(table["n_isophotes"] > 0))
@@ -59,8 +68,17 @@ def histogram_figure(
     if measured:
         figure.suptitle(
             f"Δq > {delta_q_threshold:g} or ΔPA > {delta_pa_threshold:g}°: "
-            f"{round(fraction * measured)}/{measured} lenses ({100.0 * fraction:.0f} %)"
+            f"{round(fraction * measured)}/{measured} lenses ({100.0 * fraction:.0f} %); "
+            f"paper ≈ {100.0 * PAPER_COMPLEX_FRACTION:.0f} % of 35"
         )
     else:
         figure.suptitle("no lens with isophotes")
+    a4 = table["abs_a4_a_max"].to_numpy(dtype=float)
+    a4 = a4[np.isfinite(a4)]
+    below, total = PAPER_A4_BELOW
+    axes[2].set_title(
+        f"max |a₄/a| < {A4_THRESHOLD:g}: {np.count_nonzero(a4 < A4_THRESHOLD)}/{a4.size}"
+        f" (paper {below}/{total})",
+        fontsize="medium",
+    )
     return figure
