@@ -54,6 +54,7 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert counts["phase"] == 12  # SP, SPix2, LIGHT, MASS
     assert counts["phase_spix1"] == 3  # SPix1, which also writes the adapt image
     assert counts["isophotes"] == 3
+    assert counts["fit_quality"] == 3
     assert counts["recovery"] == 3
     assert counts["recovery_table"] == 1
     assert counts["summary"] == 1
