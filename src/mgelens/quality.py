@@ -89,7 +89,15 @@ class BlockResiduals:
 
 @dataclass(frozen=True)
 class QualityStatistic:
-    """The fit-quality numbers of one residual map (module definition, steps 1–5)."""
+    """The fit-quality numbers of one residual map (module definition, steps 1–5).
+
+    ``coherence`` S, ``significance`` K, ``peak`` z_max, ``n_outlier_blocks`` n_4,
+    ``noise_scale`` τ, ``coherence_white`` √(mean z_b²) (S for τ = 1); ``worst_x``,
+    ``worst_y`` (arcsec) the used-pixel centroid of the block of z_max; ``n_pixels`` the
+    used pixels in kept blocks, ``n_blocks`` B, ``n_pairs`` the block pairs behind τ,
+    ``block_pixels`` k and ``block_arcsec`` its side. NaN statistics and ``flag`` False when
+    not ``measured``.
+    """
 
     measured: bool
     flag: bool

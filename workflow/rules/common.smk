@@ -194,10 +194,10 @@ def isophote_summaries(wildcards) -> list[str]:
 
 
 def quality_inputs(wildcards) -> dict:
-    """The MASS phase's result and model.fits, and the imaging (noise map, mask) of a lens."""
+    """The MASS phase's result and model.fits, and the imaging of a lens (read for its noise
+    map, pixel scale and mask)."""
     folder = f"results/{wildcards.lens}/mass"
     files = imaging_files(wildcards)
-    files.pop("psf")
     return {"result": f"{folder}/result.json", "model": f"{folder}/model.fits", **files}
 
 
