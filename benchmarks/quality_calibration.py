@@ -7,9 +7,10 @@ fewest for which the statistic is defined) and M1 in a SLACS-like 3.0″ mask. O
 * white N(0, 1) residuals, and residuals correlated by a Gaussian kernel of σ = 1 and
   1.5 pixels (renormalised to unit variance: PSF-scale correlation, e.g. drizzled data);
   prints quantiles of S and z_max and the fraction of maps flagged;
-* white residuals plus injected lens-light errors δ/σ: the M1 MGE's Gaussians with
-  σ_major ≥ 0.5″ too bright by a fraction f, and a centroid shift ε of the whole lens light
-  (an m = 1 dipole at the centre); prints the fraction flagged for each amplitude.
+* white residuals plus injected lens-light errors, residual = noise − δ/σ with δ the model's
+  error: the mock MGE's Gaussians with σ_major ≥ 0.5″ too bright by a fraction f, and a
+  centroid shift ε of the whole lens light (an m = 1 dipole at the centre); prints the
+  fraction flagged for each amplitude.
 
 Writes docs/images/quality_calibration.png (histograms, detection curves) and
 docs/images/quality_injection.png (z_b maps of one injection of each kind).
@@ -137,9 +138,9 @@ def main() -> None:
         lens, mock = lenses[name[:2]], mocks[name[:2]]
         outer = outer_light(lens, mock, geo["scale"])
         for f in OUTER_FRACTIONS:
-            rate = injection_trials(geo, f * outer, args.injections, rng)
+            rate = injection_trials(geo, -f * outer, args.injections, rng)
             detection[(name, "outer", f)] = rate
-            print(f"  {name}: outer Gaussians +{100 * f:g} %: flagged {rate:.3f}")
+            print(f"  {name}: outer Gaussians {100 * f:g} % too bright: flagged {rate:.3f}")
         for shift in SHIFTS:
             rate = injection_trials(
                 geo, shifted_light(lens, mock, geo["scale"], shift), args.injections, rng
@@ -159,7 +160,7 @@ def main() -> None:
             marker="o",
             label=name,
         )
-    axes[0, 2].set_xlabel("outer Gaussians (σ_major ≥ 0.5″) too bright by [%]")
+    axes[0, 2].set_xlabel("model's outer Gaussians (σ ≥ 0.5″) too bright [%]")
     axes[1, 2].set_xlabel("lens-light centroid shift [mas] (m = 1 dipole)")
     for ax in axes[:, 2]:
         ax.set_ylabel(f"fraction flagged ({args.injections} maps)")
@@ -172,7 +173,7 @@ def main() -> None:
     panels = maps.subplots(1, 3)
     cases = {
         "white noise": np.zeros(geo["mask"].shape),
-        "outer Gaussians +5 %": 0.05 * outer_light(lens, mock, geo["scale"]),
+        "outer Gaussians 5 % too bright": -0.05 * outer_light(lens, mock, geo["scale"]),
         "centroid shift 0.01″": shifted_light(lens, mock, geo["scale"], 0.01),
     }
     for ax, (title, error) in zip(panels, cases.items(), strict=True):
