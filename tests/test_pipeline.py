@@ -749,6 +749,22 @@ def test_capped_phases_record_that_they_did_not_converge(sersic_run):
         assert "WARNING mgelens.pipeline: phase" in (sersic_run / phase / "phase.log").read_text()
 
 
+def test_quality_of_a_chains_mass_phase(sersic_run, mock_dir, tmp_path):
+    """``mgelens quality`` on a real MASS model.fits: the fit mask comes from result.json
+    (1.4″ at 0.1″: 2×2-pixel blocks), and the 100× noise leaves residuals like noise."""
+    out = tmp_path / "quality.json"
+    arguments = ["quality", "--phase", str(sersic_run / "mass"), "--lens-dir", str(mock_dir)]
+    assert main([*arguments, "--out", str(out)]) == 0
+    record = json.loads(out.read_text())
+    assert record["measured"] is True
+    assert record["flag"] is False
+    assert record["block_pixels"] == 2
+    with fits.open(sersic_run / "mass" / "model.fits") as hdus:
+        fitted = int(np.count_nonzero(hdus["NRESID"].data))
+    assert 0 < record["n_pixels"] <= fitted
+    assert abs(record["significance"]) < 5
+
+
 def test_a_phase_refuses_an_unconverged_earlier_phase(sersic_run, mock_dir, tmp_path):
     shutil.copytree(sersic_run / "sp", tmp_path / "sp")
     settings = sersic_settings(allow_unconverged=False)

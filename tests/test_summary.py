@@ -6,17 +6,23 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from astropy.io import fits
 
 from mgelens.atomic import write_json
 from mgelens.cli import main
 from mgelens.isophotes import IsophoteStatistics, MassShape
 from mgelens.plot import save_png
+from mgelens.plot.comparison import einstein_radius_figure
+from mgelens.plot.mosaic import read_panel, residual_mosaic
 from mgelens.plot.summary import histogram_figure
 from mgelens.summary import (
+    FIT_COLUMNS,
     TABLE_COLUMNS,
     complex_fraction,
     complex_lenses,
     lens_summary,
+    lens_table,
+    light_model_label,
     sample_table,
 )
 
@@ -112,17 +118,193 @@ def test_histogram_figure_is_written_atomically(tmp_path, summaries):
     assert empty.get_suptitle() == "no lens with isophotes"
 
 
-def test_summary_command(tmp_path, summaries, capsys):
-    table_path, figure_path = tmp_path / "out" / "lenses.csv", tmp_path / "out" / "hist.png"
-    arguments = ["summary", *map(str, summaries), "--out-table", str(table_path)]
-    assert main([*arguments, "--out-figure", str(figure_path)]) == 0
-    table = pd.read_csv(table_path)
-    assert list(table["lens"]) == sorted(LENSES)
-    assert figure_path.read_bytes()[:8] == PNG_SIGNATURE
+# -- fits, published values, quality flags and their figures ---------------------------
+FITS = {
+    # lens: (θ_E^AG, q, γ, light components, quality measured, flag)
+    "slacs0029-0055": (1.0, 0.8, 2.0, ("set_0", "set_1", "point"), True, False),
+    "slacs0037-0942": (1.5, 0.7, 2.2, ("set_0", "set_1", "set_2", "set_3"), True, True),
+    "M1": (1.2, 0.9, 2.1, ("sersic_0", "sersic_1", "sersic_2"), False, False),
+}
+SHAPE, PIXEL, RADIUS = (41, 41), 0.1, 1.8
+
+
+def light_record(names):
+    kind = "sersic" if names[0].startswith("sersic") else "mge"
+    return {"lens_light": {"components": [{"name": n, "kind": kind} for n in names]}}
+
+
+def write_lens_folder(root, lens, theta, q, slope, names, measured, flag):
+    """results/<lens>/{isophotes.json, quality.json, mass/{result.json, samples.csv,
+    model.fits}} with a posterior of three weighted samples about (θ_E, q, γ)."""
+    folder = root / lens
+    write_json(folder / "isophotes.json", lens_summary(lens, statistics(0.05, 3.0, 0.01, 30)))
+    write_json(folder / "mass" / "result.json", {"max_likelihood_fit": light_record(names)})
+    pd.DataFrame(
+        {
+            "weight": [1.0, 2.0, 1.0],
+            "mass.einstein_radius": [0.98 * theta, theta, 1.02 * theta],
+            "mass.axis_ratio": [q, q, q],
+            "mass.slope": [slope - 0.05, slope, slope + 0.05],
+        }
+    ).to_csv(folder / "mass" / "samples.csv", index=False)
+    quality = {"measured": measured, "flag": flag, "significance": 2.0 if measured else None,
+               "peak": 7.0 if flag else 3.0, "worst_x": 1.0, "worst_y": -0.5}  # fmt: skip
+    write_json(folder / "quality.json", quality)
+    y, x = (np.indices(SHAPE) - 20) * PIXEL
+    mask = np.hypot(x, y) > RADIUS
+    nresid = np.where(mask, 0.0, x)  # rises to +x: the orientation check
+    header = fits.Header({"PIXSCALE": PIXEL})
+    images = {
+        "NRESID": nresid,
+        "RESID": 0.01 * nresid,
+        "LENSED": np.where(mask, 0.0, 0.5 * np.exp(-((np.hypot(x, y) - 1.0) ** 2) / 0.02)),
+    }
+    hdus = [fits.PrimaryHDU()] + [fits.ImageHDU(a, header, name=n) for n, a in images.items()]
+    fits.HDUList(hdus).writeto(folder / "mass" / "model.fits")
+    return folder / "isophotes.json"
+
+
+@pytest.fixture
+def lens_folders(tmp_path):
+    return [write_lens_folder(tmp_path / "results", lens, *v) for lens, v in FITS.items()]
+
+
+@pytest.fixture
+def reference(tmp_path):
+    """Published tables in the real files' formats, with hand-picked values."""
+    folder = tmp_path / "reference"
+    folder.mkdir()
+    (folder / "bolton2008_table5_sie.csv").write_text(
+        "Name,bSIE,qSIE,PASIE\nJ0029-0055,0.96,0.89,25.4\nJ0037-0942,1.53,0.84,15.9\n"
+    )
+    (folder / "shajib2021_slacs_powerlaw_tdcosmo2020.csv").write_text(
+        "name,flag_imaging,theta_E,gamma,theta_E_lo,theta_E_hi,gamma_lo,gamma_hi\n"
+        "SDSSJ0029-0055,0,0.95,,,,,\n"
+        "SDSSJ0037-0942,1,1.50,2.19,0.03,0.01,0.03,0.05\n"
+    )
+    return folder
+
+
+def test_light_model_labels():
+    assert light_model_label(light_record(("set_0", "set_1", "point"))) == "X2+point"
+    assert light_model_label(light_record(("set_0",) * 6)) == "X6"
+    assert light_model_label(light_record(("sersic_0", "sersic_1", "sersic_2"))) == "3xSersic"
+    legacy = {"lens_light": {"sets": [{"name": "set_0"}, {"name": "point"}]}}
+    assert light_model_label(legacy) == "X1+point"
+
+
+def test_lens_table_converts_and_compares(lens_folders, reference):
+    table = lens_table(lens_folders, reference).set_index("lens")
+    assert list(table.columns) == [c for c in (*TABLE_COLUMNS, *FIT_COLUMNS) if c != "lens"]
+    sie = table.loc["slacs0029-0055"]
+    assert sie["light_model"] == "X2+point"
+    assert sie["theta_e"] == 1.0
+    assert sie["theta_e_err_lo"] == pytest.approx(0.02)
+    assert sie["theta_e_err_hi"] == pytest.approx(0.02)
+    factor = 2 * math.sqrt(0.8) / 1.8  # γ = 2: SIE factor of SPEC §3.3
+    assert sie["theta_e_lt"] == pytest.approx(factor, rel=1e-12)
+    assert sie["bolton_b_sie"] == 0.96
+    assert sie["theta_e_over_bolton"] == pytest.approx(factor / 0.96, rel=1e-12)
+    assert math.isnan(sie["shajib_theta_e"])  # flag_imaging = 0
+    assert sie["quality_flag"] == False  # noqa: E712 (pandas nullable boolean)
+    epl = table.loc["slacs0037-0942"]
+    # median sample (θ 1.5, γ 2.2); slopes 2.15/2.25 of the other samples move θ_LT less
+    expected = 1.5 * math.sqrt(0.7) * (2 / 1.7) ** (1 / 1.2)
+    assert epl["theta_e_lt"] == pytest.approx(expected, rel=1e-12)
+    low = 0.98 * 1.5 * math.sqrt(0.7) * (2 / 1.7) ** (1 / 1.15)
+    assert epl["theta_e_lt_err_lo"] == pytest.approx(expected - low, rel=1e-9)
+    assert epl["slope"] == 2.2
+    assert epl["shajib_theta_e"] == 1.5
+    assert epl["shajib_theta_e_err_lo"] == 0.03
+    assert epl["theta_e_over_shajib"] == pytest.approx(expected / 1.5, rel=1e-12)
+    assert epl["quality_flag"] == True  # noqa: E712
+    mock = table.loc["M1"]
+    assert mock["light_model"] == "3xSersic"
+    assert pd.isna(mock["quality_flag"])
+    assert mock[["bolton_b_sie", "shajib_theta_e", "quality_statistic"]].isna().all()
+
+
+def test_lens_table_names_missing_fit_files(lens_folders, reference):
+    (lens_folders[0].parent / "quality.json").unlink()
+    with pytest.raises(ValueError, match=r"slacs0029-0055: .*quality.json not found"):
+        lens_table(lens_folders, reference)
+
+
+def test_einstein_radius_figure(lens_folders, reference, tmp_path):
+    table = lens_table(lens_folders, reference)
+    figure = einstein_radius_figure(table)
+    bolton, shajib = figure.axes
+    texts = [t.get_text() for t in bolton.texts]
+    assert any(t.startswith("y = a·x: a = ") and "(2 lenses)" in t for t in texts)
+    assert any("(1 lenses)" in t for t in (t.get_text() for t in shajib.texts))
+    assert "slacs0029-0055" not in texts  # 1.6 % off Bolton: not named
+    save_png(figure, tmp_path / "einstein.png")
+    empty = einstein_radius_figure(table[table["lens"] == "M1"])
+    for ax in empty.axes:
+        assert [t.get_text() for t in ax.texts] == ["no published values"]
+
+
+def test_residual_mosaic_has_one_panel_per_lens_in_arcsec(lens_folders, tmp_path):
+    panels = [
+        read_panel(
+            path.parent / "mass" / "model.fits",
+            path.parent.name,
+            "X2",
+            json.loads((path.parent / "quality.json").read_text()),
+        )
+        for path in lens_folders
+    ]
+    assert [p.state for p in panels] == ["ok", "FLAG", "n/a"]
+    figure = residual_mosaic(panels)
+    images = [ax for ax in figure.axes if ax.images and ax.get_title()]
+    assert [ax.get_title() for ax in images] == [p.lens for p in panels]
+    for ax, panel in zip(images, panels, strict=True):
+        image = ax.images[0]
+        assert image.origin == "lower"  # row index = +y
+        np.testing.assert_array_equal(image.get_array(), panel.nresid)
+        assert image.get_extent() == pytest.approx([-2.05, 2.05, -2.05, 2.05])
+        assert image.get_clim() == (-3.5, 3.5)
+        assert ax.get_xlim() == pytest.approx((-1.9, 1.9))  # mask radius + one pixel
+        assert ax.get_ylim() == pytest.approx((-1.9, 1.9))
+        assert {t.get_text() for t in ax.texts} == {"X2", panel.state}
+    colour_bars = [ax for ax in figure.axes if ax.get_ylabel() == "(data − model)/σ [σ]"]
+    assert len(colour_bars) == 1
+    flagged = images[1].lines[0].get_xydata()[0]
+    assert tuple(flagged) == (1.0, -0.5)
+    save_png(figure, tmp_path / "mosaic.png")
+    assert residual_mosaic([]).axes[0].texts[0].get_text() == "no lens"
+
+
+def test_summary_command(tmp_path, lens_folders, reference, capsys):
+    out = tmp_path / "out"
+    figures = {name: out / f"{name}.png" for name in ("out-figure", "out-einstein", "out-mosaic")}
+    arguments = ["summary", *map(str, lens_folders), "--out-table", str(out / "lenses.csv")]
+    arguments += [f"--{name}={path}" for name, path in figures.items()]
+    assert main([*arguments, "--reference-dir", str(reference)]) == 0
+    table = pd.read_csv(out / "lenses.csv")
+    assert list(table["lens"]) == sorted(FITS)
+    assert list(table["quality_flag"].astype("boolean")) == [pd.NA, False, True]
+    for path in figures.values():
+        assert path.read_bytes()[:8] == PNG_SIGNATURE
     printed = capsys.readouterr().out
-    assert "complex_fraction: 0.400" in printed
-    assert "lenses: 6 (5 with isophotes)" in printed
-    assert main([*arguments, "--out-figure", str(figure_path), "--delta-q", "0.06"]) == 0
-    assert "complex_fraction: 0.600" in capsys.readouterr().out
-    missing = ["summary", str(tmp_path / "nope.json"), "--out-table", str(table_path)]
-    assert main([*missing, "--out-figure", str(figure_path)]) == 1
+    assert "lenses: 3 (3 with isophotes)" in printed
+    assert "complex_fraction: 0.000" in printed
+    assert "quality_flagged: 1 of 2 measured" in printed
+    assert "theta_e_lt_vs_bolton: slope" in printed
+    assert "(2 lenses)" in printed
+    assert main([*arguments, "--reference-dir", str(tmp_path / "absent")]) == 0
+    assert pd.read_csv(out / "lenses.csv")["bolton_b_sie"].isna().all()
+
+
+def test_summary_command_refuses_lenses_without_fits(tmp_path, summaries, caplog):
+    out = tmp_path / "out"
+    arguments = ["summary", *map(str, summaries), "--out-table", str(out / "lenses.csv")]
+    arguments += [
+        f"--{name}={out / name}.png" for name in ("out-figure", "out-einstein", "out-mosaic")
+    ]
+    assert main(arguments) == 1
+    assert "J0001: " in caplog.text
+    assert "result.json not found" in caplog.text
+    assert not out.exists()
+    arguments[1 : 1 + len(summaries)] = [str(tmp_path / "nope.json")]
+    assert main(arguments) == 1

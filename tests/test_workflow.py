@@ -57,6 +57,7 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert counts["phase_light"] == 3  # the sheet pins M1-M3's LIGHT model
     assert "choose_light" not in counts
     assert counts["isophotes"] == 3
+    assert counts["fit_quality"] == 3
     assert counts["recovery"] == 3
     assert counts["recovery_table"] == 1
     assert counts["summary"] == 1

@@ -1,4 +1,4 @@
-"""Sample summary: per-lens isophote summaries (JSON) gathered into one table.
+"""Sample summary: per-lens isophote summaries, fits and quality flags in one table.
 
 A per-lens summary is the JSON written by ``mgelens isophotes --summary`` (built by
 :func:`lens_summary`)::
@@ -18,6 +18,46 @@ A per-lens summary is the JSON written by ``mgelens isophotes --summary`` (built
 Statistics are those of :class:`mgelens.isophotes.IsophoteStatistics` (Δq_max, ΔPA_max in
 degrees, the extreme a₄/a with its sign; JSON ``null`` = undefined). A lens is
 "complex" (paper, SPEC §11) when Δq_max > 0.1 or ΔPA_max > 10°.
+
+:func:`lens_table` adds, from the files next to each summary (``<lens folder>/mass/``
+``result.json`` and ``samples.csv``, and ``<lens folder>/quality.json`` of
+``mgelens quality``), the lens model and its comparison with published models
+(:mod:`mgelens.published`). Columns of the sample table (``results/summary/lenses.csv``):
+
+==============================  ==============================================================
+column                          meaning
+==============================  ==============================================================
+lens                            lens id (folder name)
+delta_q_max                     largest minus smallest isophote q over 0.5″–2.5″
+delta_pa_max                    ΔPA_max, degrees (NaN if all isophotes are round)
+a4_a_extreme                    a₄/a of largest modulus, signed (> 0 disky)
+n_isophotes, n_isophotes_pa     isophotes measured; of them, not round (used for ΔPA)
+abs_a4_a_max                    |a4_a_extreme|
+complex                         Δq_max > 0.1 or ΔPA_max > 10°
+mass_axis_ratio, mass_angle     MASS EPL q and φ (degrees CCW from +x)
+mass_critical_curve_*           tangential critical curve: q, angle (deg), θ_eff (arcsec)
+source                          the isophote summary file
+light_model                     MASS lens light: "X<n>" n MGE sets, "+point" with the point
+                                set; "<n>xSersic" for Sérsics
+theta_e                         θ_E^AG (arcsec), MASS posterior median
+theta_e_err_lo, theta_e_err_hi  its 1σ (68.27 %) errors: median − lower, upper − median
+theta_e_lt                      θ_E^LT = θ_E^AG √q (2/(1+q))^{1/(γ−1)}, arcsec (SPEC §3.3),
+                                median of the per-sample conversion
+theta_e_lt_err_lo, _err_hi      its 1σ errors
+slope, slope_err_lo, _err_hi    EPL γ, median and 1σ errors
+bolton_b_sie                    Bolton et al. 2008 SIE b (arcsec, intermediate axis)
+theta_e_over_bolton             theta_e_lt / bolton_b_sie
+shajib_theta_e                  Shajib et al. 2021 imaging-only power-law θ_E (arcsec, LT)
+shajib_theta_e_err_lo, _err_hi  its 1σ errors
+shajib_gamma                    its slope γ
+theta_e_over_shajib             theta_e_lt / shajib_theta_e
+quality_statistic               coherence significance K of :mod:`mgelens.quality`
+quality_peak                    largest block |z| / τ
+quality_flag                    K or the peak above its threshold (empty: not measured)
+==============================  ==============================================================
+
+Published columns are NaN for lenses absent from a table, and all NaN (with a logged
+warning) when the reference folder is absent.
 """
 
 import json
@@ -31,6 +71,9 @@ import pandas as pd
 
 from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.isophotes import IsophoteStatistics, MassShape
+from mgelens.pipeline.phases import light_components
+from mgelens.published import posterior_einstein_radius, published_values
+from mgelens.search.results import RESULT_FILE, SAMPLES_FILE
 
 DELTA_Q_THRESHOLD = 0.1
 DELTA_PA_THRESHOLD = 10.0
@@ -55,6 +98,24 @@ TABLE_COLUMNS = (
     "source",
 )
 """Columns of :func:`sample_table` (mass columns NaN when a summary has no mass model)."""
+FIT_COLUMNS = (
+    "light_model",
+    *(f"{name}{suffix}" for name in ("theta_e", "theta_e_lt", "slope")
+      for suffix in ("", "_err_lo", "_err_hi")),
+    "bolton_b_sie",
+    "theta_e_over_bolton",
+    "shajib_theta_e",
+    "shajib_theta_e_err_lo",
+    "shajib_theta_e_err_hi",
+    "shajib_gamma",
+    "theta_e_over_shajib",
+    "quality_statistic",
+    "quality_peak",
+    "quality_flag",
+)  # fmt: skip
+"""Columns :func:`lens_table` adds to :data:`TABLE_COLUMNS`."""
+QUALITY_FILE = "quality.json"
+MASS_PHASE = "mass"
 
 
 def lens_summary(
@@ -148,3 +209,73 @@ def sample_table(
     table["abs_a4_a_max"] = table["a4_a_extreme"].abs()
     table["complex"] = complex_lenses(table, delta_q_threshold, delta_pa_threshold)
     return table[list(TABLE_COLUMNS)].sort_values("lens", ignore_index=True)
+
+
+def light_model_label(record: dict) -> str:
+    """ "X<n>" (+ "+point") for n MGE sets (and the point set), "<n>xSersic" for Sérsics,
+    from a phase's ``max_likelihood_fit`` record."""
+    components = light_components(record)
+    sersics = [c for c in components if c["kind"] == "sersic"]
+    if sersics:
+        return f"{len(sersics)}xSersic"
+    point = any(c.get("name") == "point" for c in components)
+    extended = len(components) - point
+    return f"X{extended}" + ("+point" if point else "")
+
+
+def _fit_row(lens_folder: Path) -> dict:
+    """The fit columns of one lens (not the published ones)."""
+    mass = lens_folder / MASS_PHASE
+    try:
+        record = json.loads((mass / RESULT_FILE).read_text())["max_likelihood_fit"]
+        posterior = posterior_einstein_radius(pd.read_csv(mass / SAMPLES_FILE))
+        quality = json.loads((lens_folder / QUALITY_FILE).read_text())
+        row = {"light_model": light_model_label(record)}
+        for name in ("theta_e", "theta_e_lt", "slope"):
+            median = posterior[name]
+            row[name] = median
+            row[f"{name}_err_lo"] = median - posterior[f"{name}_lower"]
+            row[f"{name}_err_hi"] = posterior[f"{name}_upper"] - median
+        row["quality_statistic"] = _number(quality["significance"])
+        row["quality_peak"] = _number(quality["peak"])
+        row["quality_flag"] = bool(quality["flag"]) if quality["measured"] else pd.NA
+    except FileNotFoundError as exc:
+        raise ValueError(f"{lens_folder}: {exc.filename} not found") from exc
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise ValueError(
+            f"{lens_folder}: incomplete MASS result or quality record ({exc!r})"
+        ) from exc
+    return row
+
+
+def lens_table(
+    paths: Iterable[str | os.PathLike],
+    reference_dir: str | os.PathLike | None,
+    delta_q_threshold: float = DELTA_Q_THRESHOLD,
+    delta_pa_threshold: float = DELTA_PA_THRESHOLD,
+) -> pd.DataFrame:
+    """:func:`sample_table` plus :data:`FIT_COLUMNS` (module docstring).
+
+    Each summary's folder (``results/<lens>/``) must hold ``mass/result.json``,
+    ``mass/samples.csv`` and ``quality.json``; published values come from
+    ``reference_dir`` (:func:`mgelens.published.published_values`).
+
+    Raises
+    ------
+    ValueError
+        As :func:`sample_table`, or naming a lens folder whose fit files are missing.
+    """
+    table = sample_table(paths, delta_q_threshold, delta_pa_threshold)
+    fits = pd.DataFrame(
+        [_fit_row(Path(source).parent) for source in table["source"]], index=table.index
+    )
+    published = published_values(table["lens"], reference_dir).reset_index(drop=True)
+    fits["bolton_b_sie"] = published["bolton_b_sie"]
+    fits["theta_e_over_bolton"] = fits["theta_e_lt"] / published["bolton_b_sie"]
+    fits["shajib_theta_e"] = published["shajib_theta_e"]
+    fits["shajib_theta_e_err_lo"] = published["shajib_theta_e_lo"]
+    fits["shajib_theta_e_err_hi"] = published["shajib_theta_e_hi"]
+    fits["shajib_gamma"] = published["shajib_gamma"]
+    fits["theta_e_over_shajib"] = fits["theta_e_lt"] / published["shajib_theta_e"]
+    fits["quality_flag"] = fits["quality_flag"].astype("boolean")
+    return pd.concat([table, fits[list(FIT_COLUMNS)]], axis=1)

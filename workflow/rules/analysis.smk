@@ -1,4 +1,5 @@
-"""Isophote analysis of each lens's fitted lens light and the sample summary (SPEC §9)."""
+"""Isophote analysis of each lens's fitted lens light (SPEC §9), its fit-quality flag
+(mgelens.quality) and the sample summary with the comparison to published models."""
 
 
 rule isophotes:
@@ -32,14 +33,47 @@ rule isophotes:
         "--figure {output.figure:q} --out {output.table:q} --threads {threads} > {log:q} 2>&1"
 
 
+rule fit_quality:
+    input:
+        unpack(quality_inputs),
+    output:
+        "results/{lens}/quality.json",
+    log:
+        "logs/{lens}/fit_quality.log",
+    benchmark:
+        "results/{lens}/benchmarks/fit_quality.tsv"
+    params:
+        mgelens_version=MGELENS_VERSION,
+        lens_dir=lens_imaging_folder,
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens quality --phase results/{wildcards.lens}/mass --lens-dir {params.lens_dir:q} "
+        "--lens {wildcards.lens} --out {output:q} > {log:q} 2>&1"
+
+
 rule summary:
     input:
-        isophote_summaries,
+        unpack(summary_inputs),
     output:
         table="results/summary/lenses.csv",
         figure=report(
             "results/summary/histograms.png",
             caption="../report/summary.rst",
+            category="Sample",
+        ),
+        einstein=report(
+            "results/summary/einstein_radii.png",
+            caption="../report/einstein_radii.rst",
+            category="Sample",
+        ),
+        mosaic=report(
+            "results/summary/residual_mosaic.png",
+            caption="../report/residual_mosaic.rst",
             category="Sample",
         ),
     log:
@@ -48,6 +82,7 @@ rule summary:
         "results/summary/benchmarks/summary.tsv"
     params:
         mgelens_version=MGELENS_VERSION,
+        reference_dir=REFERENCE_DIR,
     threads: 1
     resources:
         mem_mb=2000,
@@ -55,8 +90,9 @@ rule summary:
     conda:
         "../envs/mgelens.yaml"
     shell:
-        "mgelens summary {input:q} --out-table {output.table:q} "
-        "--out-figure {output.figure:q} > {log:q} 2>&1"
+        "mgelens summary {input.summaries:q} --reference-dir {params.reference_dir:q} "
+        "--out-table {output.table:q} --out-figure {output.figure:q} "
+        "--out-einstein {output.einstein:q} --out-mosaic {output.mosaic:q} > {log:q} 2>&1"
 
 
 rule recovery:

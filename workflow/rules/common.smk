@@ -203,18 +203,54 @@ def isophote_summaries(wildcards) -> list[str]:
     return [f"results/{lens}/isophotes.json" for lens in LENSES.index]
 
 
+def quality_inputs(wildcards) -> dict:
+    """The MASS phase's result and model.fits, and the imaging of a lens (read for its noise
+    map, pixel scale and mask)."""
+    folder = f"results/{wildcards.lens}/mass"
+    files = imaging_files(wildcards)
+    return {"result": f"{folder}/result.json", "model": f"{folder}/model.fits", **files}
+
+
+def summary_inputs(wildcards) -> dict:
+    """Everything the sample summary reads per lens (isophote summary, quality record, MASS
+    result, samples and model) and the published tables that exist (:func:`reference_tables`)."""
+    lenses = list(LENSES.index)
+    return {
+        "summaries": isophote_summaries(wildcards),
+        "quality": [f"results/{lens}/quality.json" for lens in lenses],
+        "mass": [
+            f"results/{lens}/mass/{name}"
+            for lens in lenses
+            for name in ("result.json", "samples.csv", "model.fits")
+        ],
+        "reference": reference_tables(),
+    }
+
+
+REFERENCE_DIR = repo_path(config["reference_dir"])
+REFERENCE_FILES = ("bolton2008_table5_sie.csv", "shajib2021_slacs_powerlaw_tdcosmo2020.csv")
+
+
+def reference_tables() -> list[str]:
+    """The published tables in `reference_dir` (none if the folder is absent: the summary
+    then writes NaN for them and says so in its log)."""
+    return [str(REFERENCE_DIR / name) for name in REFERENCE_FILES if (REFERENCE_DIR / name).is_file()]
+
+
 def recovery_records(wildcards) -> list[str]:
     """Per-mock recovery records gathered into results/summary/recovery.csv."""
     return [f"results/{lens}/recovery.json" for lens in LENSES.index[LENSES["kind"] == "mock"]]
 
 
 def all_targets() -> list[str]:
-    """Default target: previews, the sample summary (which needs every lens's SLaM chain
-    and isophotes) and, if the sample has mocks, the table of their recovered truth."""
+    """Default target: previews, the sample summary and its figures (which need every lens's
+    SLaM chain, isophotes and quality record) and, if the sample has mocks, the table of
+    their recovered truth."""
     targets = [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
     if (LENSES["kind"] == "mock").any():
         targets.append("results/summary/recovery.csv")
-    return targets + ["results/summary/lenses.csv", "results/summary/histograms.png"]
+    summary = ("lenses.csv", "histograms.png", "einstein_radii.png", "residual_mosaic.png")
+    return targets + [f"results/summary/{name}" for name in summary]
 
 
 # SLaM phases (workflow/rules/slam.smk)

@@ -1,25 +1,38 @@
-"""``mgelens summary``: sample table and histograms from per-lens isophote summaries.
+"""``mgelens summary``: sample table and figures from the per-lens results.
 
 Example::
 
-    mgelens summary results/*/isophotes.json \\
-        --out-table results/summary/lenses.csv --out-figure results/summary/histograms.png
+    mgelens summary results/*/isophotes.json --reference-dir ../shared/data/reference \\
+        --out-table results/summary/lenses.csv --out-figure results/summary/histograms.png \\
+        --out-einstein results/summary/einstein_radii.png \\
+        --out-mosaic results/summary/residual_mosaic.png
 
-Prints the fraction of lenses with Δq_max > 0.1 or ΔPA_max > 10° (thresholds adjustable).
+Each ``results/<lens>/isophotes.json`` comes with ``results/<lens>/quality.json`` and
+``results/<lens>/mass/`` (``result.json``, ``samples.csv``, ``model.fits``), which the
+table's fit columns and the mosaic read (:func:`mgelens.summary.lens_table`). Prints the
+fraction of lenses with Δq_max > 0.1 or ΔPA_max > 10° (thresholds adjustable), the number
+of flagged fits and the slopes of our θ_E^LT against the published values.
 """
 
 import argparse
+import json
 import logging
 from pathlib import Path
 
 from mgelens.atomic import atomic_path
+from mgelens.pipeline.phases import MODEL_FILE
 from mgelens.plot import save_png
+from mgelens.plot.comparison import einstein_radius_figure
+from mgelens.plot.mosaic import read_panel, residual_mosaic
 from mgelens.plot.summary import histogram_figure
+from mgelens.published import slope_through_origin
 from mgelens.summary import (
     DELTA_PA_THRESHOLD,
     DELTA_Q_THRESHOLD,
+    MASS_PHASE,
+    QUALITY_FILE,
     complex_fraction,
-    sample_table,
+    lens_table,
 )
 
 logger = logging.getLogger(__name__)
@@ -38,6 +51,18 @@ def register(subparsers) -> None:
     parser.add_argument("--out-table", type=Path, required=True, help="sample table (CSV)")
     parser.add_argument("--out-figure", type=Path, required=True, help="histograms (PNG)")
     parser.add_argument(
+        "--out-einstein", type=Path, required=True, help="θ_E against published models (PNG)"
+    )
+    parser.add_argument(
+        "--out-mosaic", type=Path, required=True, help="residual mosaic with quality flags (PNG)"
+    )
+    parser.add_argument(
+        "--reference-dir",
+        type=Path,
+        help="folder of the published tables (shared/data/reference); without it, or if "
+        "it is absent, the published columns are NaN",
+    )
+    parser.add_argument(
         "--delta-q", type=float, default=DELTA_Q_THRESHOLD, help="complexity threshold on Δq"
     )
     parser.add_argument(
@@ -51,13 +76,26 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        table = sample_table(args.summaries, args.delta_q, args.delta_pa)
-    except ValueError as exc:
+        table = lens_table(args.summaries, args.reference_dir, args.delta_q, args.delta_pa)
+        panels = [
+            read_panel(
+                Path(source).parent / MASS_PHASE / MODEL_FILE,
+                lens,
+                label,
+                json.loads((Path(source).parent / QUALITY_FILE).read_text()),
+            )
+            for lens, label, source in table[["lens", "light_model", "source"]].itertuples(
+                index=False
+            )
+        ]
+    except (OSError, KeyError, ValueError) as exc:
         logger.error("%s", exc)
         return 1
     with atomic_path(args.out_table) as temporary:
         table.to_csv(temporary, index=False)
     save_png(histogram_figure(table, args.delta_q, args.delta_pa), args.out_figure)
+    save_png(einstein_radius_figure(table), args.out_einstein)
+    save_png(residual_mosaic(panels), args.out_mosaic)
     measured = int((table["n_isophotes"] > 0).sum())
     fraction = complex_fraction(table, args.delta_q, args.delta_pa)
     print(f"lenses: {len(table)} ({measured} with isophotes)")
@@ -65,4 +103,9 @@ def run(args: argparse.Namespace) -> int:
         f"complex_fraction: {fraction:.3f} (delta_q > {args.delta_q:g} or "
         f"delta_pa > {args.delta_pa:g} deg)"
     )
+    flags = table["quality_flag"]
+    print(f"quality_flagged: {int(flags.sum())} of {int(flags.notna().sum())} measured")
+    for name, column in (("bolton", "bolton_b_sie"), ("shajib", "shajib_theta_e")):
+        slope, error, n = slope_through_origin(table[column], table["theta_e_lt"])
+        print(f"theta_e_lt_vs_{name}: slope {slope:.4f} +- {error:.4f} ({n} lenses)")
     return 0

@@ -1,0 +1,117 @@
+"""``mgelens quality``: fit-quality flag of a phase (coherent lens-light residuals).
+
+Example::
+
+    mgelens quality --phase results/M1/mass --lens-dir results/M1/mock \\
+        --out results/M1/quality.json
+
+Reads the phase's ``model.fits`` (NRESID, LENSED), its fit mask (``mask_radius`` and
+``slam.mask_centre`` of ``result.json``, combined with the lens folder's ``mask.fits`` if
+any) and the lens's noise map, and writes the statistic of :mod:`mgelens.quality` as JSON::
+
+    {"lens": ..., "phase": ..., "mgelens_version": ..., "measured": true, "flag": false,
+     "coherence": S, "significance": K, "peak": z_max, "n_outlier_blocks": ...,
+     "noise_scale": τ, "coherence_white": ..., "worst_x": ..., "worst_y": ...,
+     "n_pixels": ..., "n_blocks": ..., "n_pairs": ..., "block_pixels": k,
+     "block_arcsec": ..., "coherence_threshold": ..., "peak_threshold": ...,
+     "inputs": {...}}
+
+(worst_x, worst_y in arcsec: the used-pixel centroid of the block of largest |z_b|).
+Exit code 1 with a one-line error for missing or inconsistent inputs.
+"""
+
+import argparse
+import functools
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+from astropy.io import fits
+
+from mgelens import CONVENTIONS_VERSION, __version__
+from mgelens.atomic import write_json
+from mgelens.imaging import Imaging, ImagingError
+from mgelens.mask import circular
+from mgelens.pipeline.phases import MODEL_FILE
+from mgelens.quality import quality_statistic
+from mgelens.search.results import RESULT_FILE
+
+logger = logging.getLogger(__name__)
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "quality",
+        help="flag coherent lens-light residuals of a phase (model.fits)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--phase", type=Path, required=True, help="phase folder, e.g. results/M1/mass"
+    )
+    parser.add_argument(
+        "--lens-dir", type=Path, help="imaging folder (default: lens_dir of result.json)"
+    )
+    parser.add_argument("--lens", help="lens name (default: the phase folder's parent)")
+    parser.add_argument("--out", type=Path, required=True, help="quality record (JSON)")
+    parser.set_defaults(func=run)
+
+
+def read_residual_images(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """NRESID and LENSED of a ``model.fits``.
+
+    Raises
+    ------
+    ValueError
+        Naming the file and the missing extension.
+    """
+    with fits.open(path) as hdus:
+        names = [hdu.name for hdu in hdus]
+        missing = [name for name in ("NRESID", "LENSED") if name not in names]
+        if missing:
+            raise ValueError(
+                f"{path}: no {' or '.join(missing)} extension (has {', '.join(names)}); "
+                "rerun the phase to write a complete model.fits"
+            )
+        return np.array(hdus["NRESID"].data, dtype=float), np.array(
+            hdus["LENSED"].data, dtype=float
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    lens = args.lens or args.phase.resolve().parent.name
+    try:
+        settings = json.loads((args.phase / RESULT_FILE).read_text())["settings"]
+        lens_dir = args.lens_dir or Path(settings["lens_dir"])
+        circle = functools.partial(
+            _circle, float(settings["mask_radius"]), tuple(settings["slam"]["mask_centre"])
+        )
+        imaging = Imaging.from_folder(lens_dir, mask_from=circle)
+        nresid, lensed = read_residual_images(args.phase / MODEL_FILE)
+        statistic = quality_statistic(
+            nresid, lensed, imaging.noise_map, imaging.mask, imaging.pixel_scale
+        )
+    except (OSError, KeyError, ValueError, ImagingError) as exc:
+        logger.error("quality of %s: %s", lens, exc)
+        return 1
+    record = {
+        "lens": lens,
+        "phase": args.phase.name,
+        "mgelens_version": __version__,
+        "conventions": CONVENTIONS_VERSION,
+        **statistic.to_dict(),
+        "inputs": {"model": str(args.phase / MODEL_FILE), "lens_dir": str(lens_dir)},
+    }
+    write_json(args.out, record)
+    state = "not measured" if not statistic.measured else ("FLAG" if statistic.flag else "ok")
+    print(
+        f"{lens}: {state}; K = {statistic.significance:.2f} (S = {statistic.coherence:.3f}), "
+        f"z_max = {statistic.peak:.2f} at ({statistic.worst_x:.2f}, {statistic.worst_y:.2f})″, "
+        f"{statistic.n_blocks} blocks, {statistic.n_pixels} pixels"
+    )
+    return 0
+
+
+def _circle(radius, centre, shape, pixel_scale) -> np.ndarray:
+    return circular(shape, pixel_scale, radius, centre)

@@ -1,0 +1,209 @@
+"""Tests of mgelens.quality and ``mgelens quality`` (fit-quality flag, docs/slacs.md)."""
+
+import json
+
+import numpy as np
+import pytest
+from astropy.io import fits
+
+from mgelens import quality
+from mgelens.cli import main
+from mgelens.convolve import convolve_image
+from mgelens.grid import pixel_centres
+from mgelens.imaging import Imaging
+from mgelens.mask import circular
+from mgelens.simulate import gaussian_psf
+
+PIXEL = 0.05
+SHAPE = (121, 121)
+RADIUS = 2.8
+NOISE = 0.01
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """A 3″-class mask with a 0.25″-wide lensed ring at 1.2″ (LENSED ≥ σ on it)."""
+    x, y = pixel_centres(SHAPE, PIXEL)
+    ring = 10 * NOISE * np.exp(-0.5 * ((np.hypot(x, y) - 1.2) / 0.12) ** 2)
+    return {
+        "x": x,
+        "y": y,
+        "lensed": ring,
+        "noise": np.full(SHAPE, NOISE),
+        "mask": circular(SHAPE, PIXEL, RADIUS),
+    }
+
+
+def statistic(scene, residuals, **changes):
+    arrays = {k: scene[k] for k in ("lensed", "noise", "mask")} | changes
+    return quality.quality_statistic(
+        residuals, arrays["lensed"], arrays["noise"], arrays["mask"], PIXEL
+    )
+
+
+def blob(scene, centre, amplitude, width=0.2):
+    return amplitude * np.exp(
+        -0.5 * ((scene["x"] - centre[0]) ** 2 + (scene["y"] - centre[1]) ** 2) / width**2
+    )
+
+
+def test_white_noise_does_not_flag_over_many_seeds(scene):
+    results = [
+        statistic(scene, np.random.default_rng(seed).standard_normal(SHAPE)) for seed in range(400)
+    ]
+    assert all(r.measured for r in results)
+    flagged = sum(r.flag for r in results)
+    # calibration (docs/slacs.md): false-flag probability < 1e-3 per lens
+    assert flagged <= 1
+    significance = np.array([r.significance for r in results])
+    coherence = np.array([r.coherence for r in results])
+    assert abs(np.median(significance)) < 0.5
+    assert np.median(coherence) == pytest.approx(1.0, abs=0.03)
+    assert np.median([r.noise_scale for r in results]) == pytest.approx(1.0, abs=0.05)
+    assert max(r.peak for r in results) < quality.PEAK_THRESHOLD
+
+
+def test_psf_correlated_noise_does_not_flag(scene):
+    kernel = gaussian_psf(9, 1.0)
+    taus = []
+    for seed in range(60):
+        noise = np.random.default_rng(seed).standard_normal(SHAPE)
+        correlated = convolve_image(noise, kernel) / np.sqrt(np.sum(kernel**2))
+        result = statistic(scene, correlated)
+        assert not result.flag
+        taus.append(result.noise_scale)
+    assert np.median(taus) > 2.0  # the blocks are wider than white noise's...
+
+
+def test_planted_coherent_residual_flags_where_it_is(scene):
+    rng = np.random.default_rng(1)
+    centre = (-1.9, 0.9)  # upper left, away from the ring
+    residuals = rng.standard_normal(SHAPE) + blob(scene, centre, 2.5)
+    result = statistic(scene, residuals)
+    assert result.flag
+    assert result.peak > quality.PEAK_THRESHOLD
+    assert result.n_outlier_blocks >= 1
+    assert np.hypot(result.worst_x - centre[0], result.worst_y - centre[1]) < 0.25
+    # row index = +y: the same blob flipped up-down is reported at −y
+    flipped = statistic(scene, residuals[::-1])
+    assert flipped.worst_y == pytest.approx(-result.worst_y, abs=0.2)
+    assert flipped.worst_x == pytest.approx(result.worst_x, abs=0.2)
+
+
+def test_extended_offset_flags_by_coherence(scene):
+    """A lens light 0.25σ too faint everywhere: no block stands out, the sum does."""
+    residuals = np.random.default_rng(2).standard_normal(SHAPE) + 0.25
+    result = statistic(scene, residuals)
+    assert result.peak < quality.PEAK_THRESHOLD
+    assert result.significance > quality.COHERENCE_THRESHOLD
+    assert result.flag
+
+
+def test_pixels_under_the_source_are_excluded(scene):
+    residuals = np.random.default_rng(3).standard_normal(SHAPE)
+    ring = scene["lensed"] >= scene["noise"]
+    assert not statistic(scene, residuals).flag
+    arcs = residuals + 8.0 * ring  # large residuals on the arcs only
+    result = statistic(scene, arcs)
+    assert not result.flag
+    no_source = statistic(scene, arcs, lensed=np.zeros(SHAPE))
+    assert no_source.flag
+    assert no_source.n_pixels == int((~scene["mask"]).sum()) - _partial(scene, np.zeros(SHAPE))
+    assert result.n_pixels < no_source.n_pixels
+
+
+def _partial(scene, lensed):
+    """Used pixels lying in blocks that are not kept (their count is not in n_pixels)."""
+    used = quality.used_pixels(np.zeros(SHAPE), lensed, scene["noise"], scene["mask"])
+    blocks = quality.block_residuals(np.zeros(SHAPE), used, PIXEL, 5)
+    return int(blocks.counts[~blocks.kept].sum())
+
+
+def test_contaminant_pixels_are_excluded(scene):
+    residuals = np.random.default_rng(4).standard_normal(SHAPE)
+    companion = blob(scene, (1.8, -1.6), 1.0, 0.25) > 0.05
+    residuals[companion] += 6.0
+    assert statistic(scene, residuals).flag
+    noise = scene["noise"].copy()
+    noise[companion] = 1e8  # SLACS sentinel
+    result = statistic(scene, residuals, noise=noise)
+    assert not result.flag
+
+
+def test_small_masks_are_not_measured(scene):
+    small = circular(SHAPE, PIXEL, 1.0)
+    result = statistic(scene, np.ones(SHAPE) * 5, mask=small)
+    assert not result.measured
+    assert not result.flag
+    assert result.n_pairs < quality.MIN_PAIRS
+    assert result.to_dict()["significance"] is None
+
+
+def test_mismatched_shapes_are_refused(scene):
+    with pytest.raises(ValueError, match=r"one shape: NRESID \(120, 121\)"):
+        statistic(scene, np.zeros((120, 121)))
+    with pytest.raises(ValueError, match="positive"):
+        quality.block_pixels(0.0)
+
+
+def test_block_size_follows_the_pixel_scale():
+    assert quality.block_pixels(0.05) == 5
+    assert quality.block_pixels(0.1) == 2  # round(2.5) = 2
+    assert quality.block_pixels(0.2) == 2
+
+
+# -- command -----------------------------------------------------------------------------
+@pytest.fixture
+def phase(tmp_path, scene):
+    """An imaging folder and a phase folder whose model.fits holds a planted residual."""
+    rng = np.random.default_rng(5)
+    lens_dir = tmp_path / "data"
+    data = rng.normal(size=SHAPE) * NOISE
+    Imaging(data, scene["noise"], gaussian_psf(5, 1.0), PIXEL).to_fits(lens_dir)
+    folder = tmp_path / "L1" / "mass"
+    folder.mkdir(parents=True)
+    settings = {"lens_dir": str(lens_dir), "mask_radius": RADIUS, "slam": {"mask_centre": [0, 0]}}
+    (folder / "result.json").write_text(json.dumps({"settings": settings}))
+    nresid = rng.standard_normal(SHAPE) + blob(scene, (1.5, 1.5), 2.5)
+    nresid[scene["mask"]] = 0.0
+    hdus = [fits.PrimaryHDU()]
+    for name, image in (("LENSED", scene["lensed"]), ("NRESID", nresid)):
+        hdus.append(fits.ImageHDU(image, name=name))
+    fits.HDUList(hdus).writeto(folder / "model.fits")
+    return folder
+
+
+def test_quality_command_writes_the_record(phase, capsys):
+    out = phase.parent / "quality.json"
+    assert main(["quality", "--phase", str(phase), "--out", str(out)]) == 0
+    record = json.loads(out.read_text())
+    assert record["lens"] == "L1"
+    assert record["phase"] == "mass"
+    assert record["flag"] is True
+    assert record["measured"] is True
+    assert record["worst_x"] == pytest.approx(1.5, abs=0.25)
+    assert record["worst_y"] == pytest.approx(1.5, abs=0.25)
+    assert record["coherence_threshold"] == quality.COHERENCE_THRESHOLD
+    assert record["peak_threshold"] == quality.PEAK_THRESHOLD
+    assert record["block_pixels"] == 5
+    assert record["n_blocks"] > 100
+    assert "FLAG" in capsys.readouterr().out
+
+
+def test_quality_command_names_a_missing_extension(phase, caplog):
+    path = phase / "model.fits"
+    with fits.open(path) as hdus:
+        fits.HDUList([hdus[0], hdus["LENSED"].copy()]).writeto(path, overwrite=True)
+    out = phase.parent / "quality.json"
+    assert main(["quality", "--phase", str(phase), "--out", str(out)]) == 1
+    assert "no NRESID extension" in caplog.text
+    assert not out.exists()
+
+
+def test_quality_command_refuses_other_shapes(phase, tmp_path, caplog):
+    other = tmp_path / "other"
+    Imaging(np.zeros((101, 101)), np.ones((101, 101)), gaussian_psf(5, 1.0), PIXEL).to_fits(other)
+    out = phase.parent / "quality.json"
+    arguments = ["quality", "--phase", str(phase), "--lens-dir", str(other), "--out", str(out)]
+    assert main(arguments) == 1
+    assert "one shape" in caplog.text
