@@ -2,6 +2,7 @@
 orientation, residual scale, contaminant pixels, MGE-set legend and the command end to
 end on a capped SP → SPix1 run of a small mock with contaminants."""
 
+import io
 import json
 
 import numpy as np
@@ -30,7 +31,13 @@ from mgelens.overview import (
 )
 from mgelens.pipeline import phases
 from mgelens.pipeline.settings import settings_from_mapping
-from mgelens.plot.overview import RESIDUAL_LIMIT, image_extent, overview_figure
+from mgelens.plot.overview import (
+    CONTOUR_RANGE,
+    RESIDUAL_LIMIT,
+    contour_levels,
+    image_extent,
+    overview_figure,
+)
 from mgelens.search.results import PhaseResult
 from mgelens.source.mesh import VoronoiMesh
 
@@ -147,6 +154,29 @@ def test_contaminants_are_the_ignored_pixels_inside_the_fit_circle():
         (layer,) = [im for im in panel(figure, title).images if im.get_gid() == "contaminants"]
         shown = ~np.ma.getmaskarray(layer.get_array())
         np.testing.assert_array_equal(shown, found)
+
+
+def test_lens_light_contours_are_log_spaced_below_the_peak():
+    overview = synthetic_overview()
+    levels = contour_levels(overview.lens_light)
+    ratios = levels[1:] / levels[:-1]
+    np.testing.assert_allclose(ratios, ratios[0])
+    assert levels[-1] < overview.lens_light.max()
+    assert levels[0] >= CONTOUR_RANGE * overview.lens_light.max()
+    (lines,) = panel(overview_figure(overview), "lens-light contours").collections
+    np.testing.assert_allclose(lines.levels, levels)
+
+
+def test_a_fit_without_light_still_draws():
+    """A capped fit can zero every lens-light and source intensity."""
+    zero = np.zeros((21, 21))
+    overview = synthetic_overview(
+        lens_light=zero, lensed_source=zero, source=SourcePlane(zero, image_extent(zero.shape, 0.1))
+    )
+    figure = overview_figure(overview)
+    figure.savefig(io.BytesIO(), format="png", dpi=30)
+    assert contour_levels(zero).size == 0
+    assert "no positive lens light" in [t.get_text() for t in panel(figure, "lens-light").texts]
 
 
 def test_voronoi_edges_are_scipys_finite_ridges():

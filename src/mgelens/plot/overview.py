@@ -168,8 +168,11 @@ def _source_panel(ax: Axes, figure: Figure, overview: Overview, label: str) -> N
 
 def contour_levels(image: np.ndarray) -> np.ndarray:
     """:data:`N_CONTOURS` log-spaced levels from the 5th percentile of the positive finite
-    values (at least :data:`CONTOUR_RANGE` × the peak) to just below the peak."""
+    values (at least :data:`CONTOUR_RANGE` × the peak) to just below the peak; none if no
+    value is positive."""
     positive = image[np.isfinite(image) & (image > 0.0)]
+    if positive.size == 0:
+        return np.empty(0)
     peak = float(positive.max())
     low = max(float(np.percentile(positive, 5.0)), CONTOUR_RANGE * peak)
     return np.geomspace(low, peak, N_CONTOURS + 1)[:-1]
@@ -184,11 +187,14 @@ def component_text(component) -> str:
 def _contour_panel(ax: Axes, figure: Figure, overview: Overview, label: str) -> None:
     x, y = pixel_centres(overview.lens_light.shape, overview.pixel_scale)
     levels = contour_levels(overview.lens_light)
-    norm = colors.LogNorm(vmin=levels[0] / 4.0, vmax=levels[-1])
-    light = overview.lens_light
-    positive = np.ma.masked_where(~(np.isfinite(light) & (light > 0.0)), light)
-    lines = ax.contour(x, y, positive, levels=levels, cmap="Greys", norm=norm)
-    figure.colorbar(lines, ax=ax, shrink=0.9, label=label, format="%.3g")
+    if levels.size:
+        norm = colors.LogNorm(vmin=levels[0] / 4.0, vmax=levels[-1])
+        light = overview.lens_light
+        positive = np.ma.masked_where(~(np.isfinite(light) & (light > 0.0)), light)
+        lines = ax.contour(x, y, positive, levels=levels, cmap="Greys", norm=norm)
+        figure.colorbar(lines, ax=ax, shrink=0.9, label=label, format="%.3g")
+    else:
+        ax.text(0.5, 0.9, "no positive lens light", ha="center", transform=ax.transAxes)
     for k, component in enumerate(overview.components):
         colour = COMPONENT_COLOURS[k % len(COMPONENT_COLOURS)]
         text = component_text(component)
