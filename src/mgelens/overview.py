@@ -44,10 +44,11 @@ class LightComponent:
         of the ``max_likelihood_fit`` record.
     semi_major : float
         Size of the ellipse drawn, arcsec: for an MGE set the flux-weighted mean major-axis
-        dispersion Σ F_k σ_k/q / Σ F_k (F_k ∝ σ_k² I_k, SPEC §2.2); for a Sérsic its
+        dispersion Σ F_k σ_k/q / Σ F_k (F_k ∝ σ_k² max(I_k, 0), SPEC §2.2); for a Sérsic its
         major-axis half-light radius R_e/√q; 0 for a set whose solved fluxes are all 0.
-    point : bool
-        The compact point set (SPEC §2.4), marked rather than drawn as an ellipse.
+    kind : {"mge", "point", "sersic"}
+        An extended MGE set, the compact point set (SPEC §2.4; marked rather than drawn as
+        an ellipse) or a Sérsic.
     """
 
     label: str
@@ -55,7 +56,11 @@ class LightComponent:
     axis_ratio: float
     angle: float
     semi_major: float
-    point: bool = False
+    kind: str = "mge"
+
+    @property
+    def point(self) -> bool:
+        return self.kind == "point"
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,8 +166,9 @@ def light_component(name: str, profile: MGESet | Sersic, intensities: np.ndarray
     ``point``, ``sersic_<k>``) with its solved intensities."""
     q, angle = axis_ratio_and_angle_from(profile.ell_comps)
     if isinstance(profile, Sersic):
-        size = profile.effective_radius / np.sqrt(q)
+        kind, size = "sersic", profile.effective_radius / np.sqrt(q)
     else:
+        kind = "point" if name == "point" else "mge"
         fluxes = profile.sigmas**2 * np.clip(intensities, 0.0, None)
         total = fluxes.sum()
         size = float(np.sum(fluxes * profile.sigmas / q) / total) if total > 0 else 0.0
@@ -172,7 +178,7 @@ def light_component(name: str, profile: MGESet | Sersic, intensities: np.ndarray
         float(q),
         float(angle),
         float(size),
-        point=name == "point",
+        kind,
     )
 
 

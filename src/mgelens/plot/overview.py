@@ -34,7 +34,7 @@ from matplotlib.patches import Circle, Patch
 
 from mgelens.grid import pixel_centres
 from mgelens.isophotes import Ellipse
-from mgelens.overview import Overview
+from mgelens.overview import LightComponent, Overview
 
 RESIDUAL_LIMIT = 3.5
 """Colour limits ±3.5 σ of the normalised-residual panel."""
@@ -178,7 +178,7 @@ def contour_levels(image: np.ndarray) -> np.ndarray:
     return np.geomspace(low, peak, N_CONTOURS + 1)[:-1]
 
 
-def component_text(component) -> str:
+def component_text(component: LightComponent) -> str:
     """Legend text of a lens-light component: ``set k: q=…, PA=…°``."""
     text = f"{component.label}: q={component.axis_ratio:.2f}, PA={component.angle:.0f}°"
     return text if component.semi_major > 0 or component.point else f"{text} (no flux)"
@@ -214,7 +214,7 @@ def _contour_panel(ax: Axes, figure: Figure, overview: Overview, label: str) -> 
             linestyle=":",
         )
     ax.legend(loc="lower right", fontsize="x-small", framealpha=0.8)
-    sersic = any(c.label.startswith("Sérsic") for c in overview.components)
+    sersic = any(c.kind == "sersic" for c in overview.components)
     ax.set_title(f"lens-light contours and {'Sérsics' if sersic else 'MGE sets'}")
     ax.set_xlabel("x [arcsec]")
     ax.set_ylabel("y [arcsec]")
