@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from astropy.io import fits
 from matplotlib import colors
 from scipy.spatial import Voronoi
 
@@ -293,6 +294,12 @@ def test_overview_command_on_a_pixelized_phase(capped_run, mock_dir, tmp_path):
     expected[10, 20] = True
     np.testing.assert_array_equal(overview.contaminants, expected)
     assert len(overview.source.mesh_edges) > 64
+    written = fits.getdata(capped_run / "spix1" / "model.fits", extname="SRCPLANE")
+    image = overview.source.image
+    blank = np.isnan(image)
+    assert 0 < blank.sum() < image.size / 2  # outside the mesh's hull
+    np.testing.assert_allclose(image[~blank], written[~blank], rtol=1e-9, atol=1e-12)
+    assert np.all(written[blank] == 0.0)
     assert np.isnan(overview.normalized_residuals[fitted.dataset.mask]).all()
     out = tmp_path / "figures" / "overview.png"
     arguments = ["overview", "--phase", str(capped_run / "spix1"), "--lens-dir", str(mock_dir)]

@@ -17,7 +17,7 @@ import numpy as np
 
 from mgelens.fit import FitResult
 from mgelens.geometry import axis_ratio_and_angle_from
-from mgelens.grid import to_native
+from mgelens.grid import pixel_centres, to_native
 from mgelens.imaging import Imaging
 from mgelens.light import MGESet, Sersic
 from mgelens.mask import SLACS_NOISE_THRESHOLD, circular
@@ -65,7 +65,8 @@ class LightComponent:
 
 @dataclass(frozen=True, eq=False)
 class SourcePlane:
-    """Source-plane reconstruction on a regular grid (:func:`source_plane_image`).
+    """Source-plane reconstruction on a regular grid (:func:`source_plane_image`), NaN
+    outside a pixelized source's mesh.
 
     ``extent`` = (x_min, x_max, y_min, y_max) arcsec of the grid's outer pixel edges;
     ``mesh_edges`` (n, 2, 2) holds the finite Voronoi cell edges [(x, y), (x, y)] of a
@@ -152,6 +153,16 @@ def voronoi_edges(mesh: VoronoiMesh) -> np.ndarray:
     return np.stack(
         [mesh.circumcentres[triangles[once]], mesh.circumcentres[neighbours[once]]], axis=1
     )
+
+
+def outside_hull_blank(
+    image: np.ndarray, pixel_scale: float, centre: tuple[float, float], mesh: VoronoiMesh
+) -> np.ndarray:
+    """A source-plane ``image`` (grid of ``pixel_scale`` about ``centre``) with NaN at the
+    grid points outside the mesh's convex hull, where the reconstruction is undefined."""
+    x, y = pixel_centres(image.shape, pixel_scale, centre)
+    outside = mesh.delaunay.find_simplex(np.column_stack([x.ravel(), y.ravel()])) < 0
+    return np.where(outside.reshape(image.shape), np.nan, image)
 
 
 def _component_label(name: str) -> str:
@@ -243,7 +254,10 @@ def overview_from_fit(
     image, source_pixel, centre = source_plane_image(result)
     half_x, half_y = 0.5 * source_pixel * image.shape[1], 0.5 * source_pixel * image.shape[0]
     extent = (centre[0] - half_x, centre[0] + half_x, centre[1] - half_y, centre[1] + half_y)
-    mesh_edges = None if result.source is None else voronoi_edges(result.source.mesh)
+    mesh_edges = None
+    if result.source is not None:
+        mesh_edges = voronoi_edges(result.source.mesh)
+        image = outside_hull_blank(image, source_pixel, centre, result.source.mesh)
     title = (
         f"{lens} · {phase}: ln ε = {result.log_evidence:.2f}, "
         f"χ²/N = {result.chi_squared / max(weighted, 1):.3f} (N = {weighted})"

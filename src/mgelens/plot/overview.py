@@ -8,8 +8,9 @@ file reading):
    noise at the 1e8 sentinel or excluded by ``mask.fits``) as a flat grey overlay; the
    fit circle dashed.
 2. **lens light ⊗ PSF** — the lens-light model, same asinh stretch as the data.
-3. **source plane** — the reconstruction (linear scale) with the Voronoi cell edges of a
-   pixelized source (none for the SP phase's MGE source) and the tangential caustic.
+3. **source plane** — the reconstruction (linear scale; blank outside the mesh) with the
+   Voronoi cell edges of a pixelized source (none for the SP phase's MGE source) and the
+   tangential caustic.
 4. **normalised residuals** (data − model)/σ — diverging map fixed at ±3.5 σ,
    contaminants grey as in panel 1.
 5. **lens-light contours** — log-spaced isophote levels of the lens-light model, each MGE
@@ -153,8 +154,8 @@ def _curve(ax: Axes, curve, label: str) -> None:
 
 def _source_panel(ax: Axes, figure: Figure, overview: Overview, label: str) -> None:
     source = overview.source
-    low = min(0.0, float(np.min(source.image)))
-    norm = colors.Normalize(vmin=low, vmax=float(np.max(source.image)))
+    low = min(0.0, float(np.nanmin(source.image)))
+    norm = colors.Normalize(vmin=low, vmax=float(np.nanmax(source.image)))
     kind = "Voronoi mesh" if source.mesh_edges is not None else "MGE"
     _image(ax, figure, source.image, source.extent, norm, "inferno", f"source ({kind})", label)
     if source.mesh_edges is not None:
