@@ -109,7 +109,8 @@ def _image(ax: Axes, figure: Figure, image, extent, norm, cmap, title: str, labe
     ax.set_ylabel("y [arcsec]")
     bar = figure.colorbar(shown, ax=ax, shrink=0.9, label=label)
     if isinstance(norm, colors.AsinhNorm):
-        bar.set_ticks(asinh_ticks(norm), labels=[f"{t:g}" for t in asinh_ticks(norm)])
+        ticks = asinh_ticks(norm)
+        bar.set_ticks(ticks, labels=[f"{t:g}" for t in ticks])
     return shown
 
 
