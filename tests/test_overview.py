@@ -100,9 +100,14 @@ def test_sie_critical_curve_is_its_half_convergence_ellipse():
     np.testing.assert_allclose(np.hypot(xp, yp / q), 2 * theta_e / (1 + q), atol=0.01)
 
 
-def test_a_mass_without_critical_curve_gives_none(caplog):
+def test_a_mass_without_critical_curve_gives_none_and_a_note(caplog):
+    """SP of slacs1020+1122 found θ_E = 5.3″, q = 0.03: no closed curve within ±3″."""
     assert critical_lines([SIE((0.0, 0.0), 5.0, 1.0, 0.0)]) == (None, None)
     assert "no critical curve drawn" in caplog.text
+    figure = overview_figure(synthetic_overview())
+    for title, label in (("lensed source", "critical curve"), ("source", "caustic")):
+        (note,) = panel(figure, title).texts
+        assert note.get_text().startswith(f"no {label}: no closed")
 
 
 # -- figure conventions ----------------------------------------------------------------
@@ -282,7 +287,7 @@ def test_sp_overview_legend_matches_the_fit_record(capped_run, mock_dir):
     assert len(panel(figure, "source (MGE)").collections) == 0
     chi2_n = fitted.chi_squared / np.count_nonzero(fitted.dataset.noise_map < 1e3)
     assert figure.get_suptitle() == (
-        f"M · sp: ln ε = {record['log_evidence']:.2f}, χ²/N = {chi2_n:.3f} "
+        f"M · sp: ln L = {record['log_evidence']:.2f}, χ²/N = {chi2_n:.3f} "
         f"(N = {np.count_nonzero(fitted.dataset.noise_map < 1e3)})"
     )
 

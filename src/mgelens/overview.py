@@ -85,7 +85,7 @@ class Overview:
     Attributes
     ----------
     title : str
-        Figure title: lens, phase, ln ε and χ²/N.
+        Figure title: lens, phase, ln ε (ln L for an MGE source) and χ²/N.
     pixel_scale : float
         Δ, arcsec per pixel of the image-plane arrays (grid origin (0, 0)).
     unit : str
@@ -243,8 +243,9 @@ def overview_from_fit(
     lens, phase : str
         For the title.
 
-    The title's χ²/N counts only the N pixels that carry weight (inside the mask, not
-    contaminants).
+    The title gives the figure of merit, the log evidence ln ε of a pixelized source or
+    ln L (the same number, :class:`~mgelens.fit.FitResult`) of an MGE source, and χ²/N
+    over the N pixels that carry weight (inside the mask, not contaminants).
     """
     dataset = result.dataset
     imaging = dataset.imaging
@@ -258,8 +259,9 @@ def overview_from_fit(
     if result.source is not None:
         mesh_edges = voronoi_edges(result.source.mesh)
         image = outside_hull_blank(image, source_pixel, centre, result.source.mesh)
+    merit = "ln ε" if result.source is not None else "ln L"
     title = (
-        f"{lens} · {phase}: ln ε = {result.log_evidence:.2f}, "
+        f"{lens} · {phase}: {merit} = {result.log_evidence:.2f}, "
         f"χ²/N = {result.chi_squared / max(weighted, 1):.3f} (N = {weighted})"
     )
 

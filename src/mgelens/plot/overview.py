@@ -20,6 +20,9 @@ file reading):
 6. **lensed source ⊗ PSF** — asinh stretch (linear below σ̃), with the tangential
    critical curve.
 
+A mass model without a closed tangential critical curve within ±3″ (SPEC §3.4) gets a
+note in panels 3 and 6 instead of the curves.
+
 Image-plane panels show the fit circle and a margin around it. Every image is drawn with
 ``imshow(..., origin="lower")`` and an (x, y) arcsec extent from the pixel edges of the
 grid (SPEC §1.1): +x to the right, +y up. Pixels outside the fit's mask are blank.
@@ -148,9 +151,21 @@ def _fit_circle(ax: Axes, overview: Overview, colour: str) -> None:
 
 
 def _curve(ax: Axes, curve, label: str) -> None:
-    if curve is not None:
-        ax.plot(*curve, color=CRITICAL_COLOUR, linewidth=1.0, label=label)
-        ax.legend(loc="upper right", fontsize="x-small", framealpha=0.6)
+    """Draw a critical curve or caustic, or say that the mass model has none."""
+    if curve is None:
+        ax.text(
+            0.5,
+            0.95,
+            f"no {label}: no closed tangential critical curve within ±3″",
+            color=CRITICAL_COLOUR,
+            fontsize="x-small",
+            ha="center",
+            va="top",
+            transform=ax.transAxes,
+        )
+        return
+    ax.plot(*curve, color=CRITICAL_COLOUR, linewidth=1.0, label=label)
+    ax.legend(loc="upper right", fontsize="x-small", framealpha=0.6)
 
 
 def _source_panel(ax: Axes, figure: Figure, overview: Overview, label: str) -> None:
