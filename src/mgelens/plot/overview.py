@@ -157,10 +157,10 @@ def _curve(ax: Axes, curve, label: str) -> None:
             0.5,
             0.95,
             f"no {label}: no closed tangential critical curve within ±3″",
-            color=CRITICAL_COLOUR,
             fontsize="x-small",
             ha="center",
             va="top",
+            bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": CRITICAL_COLOUR},
             transform=ax.transAxes,
         )
         return
