@@ -58,6 +58,7 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert "choose_light" not in counts
     assert counts["isophotes"] == 3
     assert counts["fit_quality"] == 3
+    assert counts["overview"] == 3
     assert counts["recovery"] == 3
     assert counts["recovery_table"] == 1
     assert counts["summary"] == 1
@@ -472,10 +473,10 @@ DAG's plumbing, not a lens model, so each phase builds on unconverged earlier ph
 @pytest.mark.slow
 def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     """`snakemake` (default target) on a small one-lens mock: mock, preview, the five
-    phases, isophotes of the MASS lens light and the summary. After deleting the MASS
-    result, asking for it reruns only MASS; the next default run redoes only what reads
-    it. (Snakemake does not rebuild a missing intermediate file on its own while the files
-    made from it are present.)"""
+    phases, isophotes of the MASS lens light, the overview figure and the summary. After
+    deleting the MASS result, asking for it reruns only MASS; the next default run redoes
+    only what reads it. (Snakemake does not rebuild a missing intermediate file on its own
+    while the files made from it are present.)"""
     (tmp_path / "sheet.tsv").write_text(SHEET_HEADER + "M1\tmock\tM1\t\t1.4\t2\tno\t0.28\t0.98\n")
     config = tmp_path / "smoke.yaml"
     config.write_text(SMOKE_CONFIG.format(sheet=tmp_path / "sheet.tsv"))
@@ -496,6 +497,7 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     table = pd.read_csv(tmp_path / "results" / "summary" / "lenses.csv")
     assert list(table["lens"]) == ["M1"]
     assert (tmp_path / "results" / "summary" / "histograms.png").stat().st_size > 10_000
+    assert (lens / "figures" / "overview.png").stat().st_size > 10_000
     recovery = json.loads((lens / "recovery.json").read_text())
     assert {row["name"] for row in recovery["mass"]} >= {"mass.einstein_radius", "mass.slope"}
     assert set(recovery["criteria"]) == {
@@ -522,7 +524,8 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     after = snakemake("-n", f"--configfile={config}", workdir=tmp_path)
     counts = job_counts(after.stdout + after.stderr)
     assert counts == {
-        "isophotes": 1, "recovery": 1, "recovery_table": 1, "summary": 1, "all": 1, "total": 5
+        "isophotes": 1, "overview": 1, "recovery": 1, "recovery_table": 1, "summary": 1,
+        "all": 1, "total": 6,
     }  # fmt: skip
 
 

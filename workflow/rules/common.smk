@@ -9,6 +9,7 @@ import json
 import os
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import pandas as pd
 from snakemake.exceptions import WorkflowError
@@ -243,10 +244,11 @@ def recovery_records(wildcards) -> list[str]:
 
 
 def all_targets() -> list[str]:
-    """Default target: previews, the sample summary and its figures (which need every lens's
-    SLaM chain, isophotes and quality record) and, if the sample has mocks, the table of
-    their recovered truth."""
+    """Default target: previews and overview figures, the sample summary and its figures
+    (which need every lens's SLaM chain, isophotes and quality record) and, if the sample
+    has mocks, the table of their recovered truth."""
     targets = [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
+    targets += [f"results/{lens}/figures/overview.png" for lens in LENSES.index]
     if (LENSES["kind"] == "mock").any():
         targets.append("results/summary/recovery.csv")
     summary = ("lenses.csv", "histograms.png", "einstein_radii.png", "residual_mosaic.png")
@@ -294,6 +296,22 @@ def phase_inputs(wildcards) -> dict:
     if "spix1" in earlier:
         files["adapt_image"] = f"results/{wildcards.lens}/spix1/adapt_image.fits"
     return files
+
+
+def overview_inputs(wildcards) -> dict:
+    """Files the overview figure reads to rebuild the MASS fit: MASS's result, samples and
+    model, and what the MASS phase itself read (:func:`phase_inputs`: the imaging, the
+    earlier phases' results and SPix1's adapt image)."""
+    files = phase_inputs(SimpleNamespace(lens=wildcards.lens, phase="mass"))
+    folder = f"results/{wildcards.lens}/mass"
+    files["result"] = f"{folder}/result.json"
+    files["samples"] = f"{folder}/samples.csv"
+    files["model"] = f"{folder}/model.fits"
+    return files
+
+
+def overview_mem_mb(wildcards, attempt) -> int:
+    return 3000 * attempt
 
 
 def light_model_of(wildcards):

@@ -1,4 +1,4 @@
-"""Figures per lens."""
+"""Figures per lens: the imaging preview and the overview of the final fit."""
 
 
 rule preview:
@@ -28,3 +28,31 @@ rule preview:
     shell:
         "mgelens preview {params.folder:q} --out {output:q}{params.pixel_scale} "
         "--threads {threads} > {log:q} 2>&1"
+
+
+rule overview:
+    input:
+        unpack(overview_inputs),
+    output:
+        report(
+            "results/{lens}/figures/overview.png",
+            caption="../report/overview.rst",
+            category="Fits",
+            labels={"lens": "{lens}"},
+        ),
+    log:
+        "logs/{lens}/overview.log",
+    benchmark:
+        "results/{lens}/benchmarks/overview.tsv"
+    params:
+        mgelens_version=MGELENS_VERSION,
+        lens_dir=lens_imaging_folder,
+    threads: 1
+    resources:
+        mem_mb=overview_mem_mb,
+        runtime=15,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens overview --phase results/{wildcards.lens}/mass --lens-dir {params.lens_dir:q} "
+        "--lens {wildcards.lens} --out {output:q} --threads {threads} > {log:q} 2>&1"

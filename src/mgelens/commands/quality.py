@@ -87,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
         circle = functools.partial(
             _circle, float(settings["mask_radius"]), tuple(settings["slam"]["mask_centre"])
         )
-        imaging = Imaging.from_folder(lens_dir, mask_from=circle)
+        pixel_scale = settings["slam"].get("pixel_scale")  # the sheet's, if the fit had one
+        imaging = Imaging.from_folder(lens_dir, pixel_scale=pixel_scale, mask_from=circle)
         nresid, lensed = read_residual_images(args.phase / MODEL_FILE)
         statistic = quality_statistic(
             nresid, lensed, imaging.noise_map, imaging.mask, imaging.pixel_scale
