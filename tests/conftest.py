@@ -77,8 +77,17 @@ class BackgroundChain:
             self.process.wait()
 
 
+CHAIN_FIXTURES = {"background_chain", "chain_recovery"}
+"""Fixtures through which a test reads the background chain (tests/test_workflow.py)."""
+
+
 def _needs_background_chain(item: pytest.Item) -> bool:
-    if "background_chain" not in item.fixturenames or item.get_closest_marker("skip"):
+    """Whether ``item`` reads M1's chain. Its own arguments are checked, not
+    ``item.fixturenames``: that closure holds every autouse fixture, this one's too, so
+    any selection of tests would start the 30-minute chain."""
+    info = getattr(item, "_fixtureinfo", None)
+    arguments = set(info.argnames) if info is not None else set()
+    if not arguments & CHAIN_FIXTURES or item.get_closest_marker("skip"):
         return False
     callspec = getattr(item, "callspec", None)
     lens = callspec.params.get("chain_recovery", BACKGROUND_LENS) if callspec else BACKGROUND_LENS
