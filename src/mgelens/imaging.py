@@ -592,9 +592,9 @@ def _resolve_pixel_scale(explicit: float | None, from_header: float | None, path
         if from_header is None:
             raise ImagingError(
                 f"{path}: no pixel scale: the header has neither {PIXSCALE_KEY} nor a "
-                "celestial WCS; give the folder an info.json with pixel_scale_arcsec, or "
-                "set the lens's `pixel_scale` column in the sample sheet (mgelens phase "
-                "--pixel-scale, slam.pixel_scale)",
+                "celestial WCS; pass pixel_scale=<arcsec/pixel>, give the folder an "
+                "info.json with pixel_scale_arcsec, or set the lens's `pixel_scale` column "
+                "in the sample sheet (mgelens phase --pixel-scale)",
                 component="pixel_scale",
             )
         return from_header
