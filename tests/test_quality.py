@@ -12,6 +12,7 @@ from mgelens.convolve import convolve_image
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.mask import circular
+from mgelens.mass import SIE, ExternalShear
 from mgelens.simulate import gaussian_psf
 
 PIXEL = 0.05
@@ -163,7 +164,10 @@ def phase(tmp_path, scene):
     folder = tmp_path / "L1" / "mass"
     folder.mkdir(parents=True)
     settings = {"lens_dir": str(lens_dir), "mask_radius": RADIUS, "slam": {"mask_centre": [0, 0]}}
-    (folder / "result.json").write_text(json.dumps({"settings": settings}))
+    sie = {"centre": [0.0, 0.0], "einstein_radius": 1.2, "axis_ratio": 1.0, "angle": 0.0}
+    mass = [{"type": "SIE", "parameters": sie}]
+    record = {"settings": settings, "max_likelihood_fit": {"mass": mass}}
+    (folder / "result.json").write_text(json.dumps(record))
     nresid = rng.standard_normal(SHAPE) + blob(scene, (1.5, 1.5), 2.5)
     nresid[scene["mask"]] = 0.0
     hdus = [fits.PrimaryHDU()]
@@ -187,7 +191,59 @@ def test_quality_command_writes_the_record(phase, capsys):
     assert record["peak_threshold"] == quality.PEAK_THRESHOLD
     assert record["block_pixels"] == 5
     assert record["n_blocks"] > 100
+    # an SIS of θ_E = 1.2″: its critical curve is that circle, inside the 2.8″ fit circle
+    lensing = record["lensing"]
+    assert lensing["critical_curve_einstein_radius"] == pytest.approx(1.2, abs=0.01)
+    assert lensing["flag"] is False
     assert "FLAG" in capsys.readouterr().out
+
+
+# -- lensing check -------------------------------------------------------------------------
+def test_a_mass_that_lenses_inside_the_mask_passes_the_lensing_check():
+    check = quality.lensing_check((SIE((0.0, 0.0), 1.0, 1.0, 0.0),), mask_radius=3.0)
+    assert not check.flag
+    assert check.critical_curve_einstein_radius == pytest.approx(1.0, abs=0.01)
+    # an SIE with shear: the curve's circle-equivalent radius is still close to θ_E
+    sie = (SIE((0.1, -0.05), 1.2, 0.8, 40.0), ExternalShear(0.03, -0.02))
+    assert quality.lensing_check(sie, 3.0).critical_curve_einstein_radius == pytest.approx(
+        1.2, rel=0.05
+    )
+
+
+def test_the_first_real_lens_degenerate_sp_mass_is_flagged():
+    """slacs1020+1122's SP maximum (docs/slacs.md): a needle SIE and strong shear."""
+    needle = (SIE((-0.5246, 0.0910), 5.3277, 0.02717, 155.70), ExternalShear(0.1156, -0.1577))
+    check = quality.lensing_check(needle, mask_radius=3.0)
+    assert check.flag
+    assert check.critical_curve_einstein_radius is None
+    assert "critical curve" in check.reason
+
+
+def test_a_needle_thin_critical_curve_is_flagged():
+    """slacs1020+1122's SPix1 mass (docs/slacs.md): q = 0.0005, a closed but needle curve."""
+    needle = (SIE((-0.3184, 0.1576), 5.7640, 0.00050025, 158.94), ExternalShear(0.1401, -0.3324))
+    check = quality.lensing_check(needle, mask_radius=3.0)
+    assert check.flag
+    assert "needle" in check.reason
+    assert check.critical_curve_einstein_radius == pytest.approx(0.14, abs=0.02)
+    # a flattened but galaxy-like mass passes
+    flat = (SIE((0.0, 0.0), 1.2, 0.2, 30.0),)
+    assert not quality.lensing_check(flat, mask_radius=3.0).flag
+
+
+@pytest.mark.parametrize(
+    ("radius", "centre", "mask_centre", "flagged"),
+    [
+        (2.9, (0.0, 0.0), (0.0, 0.0), False),
+        (3.2, (0.0, 0.0), (0.0, 0.0), True),  # the curve lies beyond the 3″ circle
+        (1.0, (0.5, 0.0), (0.0, 0.0), False),  # reaches 1.5″ from the centre
+        (1.0, (0.0, 0.0), (1.5, 0.0), True),  # reaches 2.5″ from an offset 2″ circle
+    ],
+)
+def test_the_critical_curve_must_lie_inside_the_fit_circle(radius, centre, mask_centre, flagged):
+    mask_radius = 2.0 if mask_centre != (0.0, 0.0) else 3.0
+    check = quality.lensing_check((SIE(centre, radius, 1.0, 0.0),), mask_radius, mask_centre)
+    assert check.flag is flagged
 
 
 def test_quality_command_names_a_missing_extension(phase, caplog):

@@ -541,6 +541,10 @@ def einstein_radius_effective(
     profiles: Sequence[MassProfile], grid_spacing: float = 0.02, half_width: float = 3.0
 ) -> float:
     """sqrt(area/π) in arcsec of the tangential critical curve (shoelace area)."""
-    x, y = tangential_critical_curve(profiles, grid_spacing, half_width)
+    return circle_equivalent_radius(*tangential_critical_curve(profiles, grid_spacing, half_width))
+
+
+def circle_equivalent_radius(x: np.ndarray, y: np.ndarray) -> float:
+    """sqrt(area/π) of a closed polyline (last point equal to the first; shoelace area)."""
     area = 0.5 * abs(float(np.sum(x[:-1] * y[1:] - x[1:] * y[:-1])))
     return float(np.sqrt(area / np.pi))

@@ -54,6 +54,8 @@ theta_e_over_shajib             theta_e_lt / shajib_theta_e
 quality_statistic               coherence significance K of :mod:`mgelens.quality`
 quality_peak                    largest block |z| / τ
 quality_flag                    K or the peak above its threshold (empty: not measured)
+lensing_flag                    the MASS model has no closed tangential critical curve in the
+                                fit circle (:func:`mgelens.quality.lensing_check`)
 ==============================  ==============================================================
 
 Published columns are NaN for lenses absent from a table, and all NaN (with a logged
@@ -112,6 +114,7 @@ FIT_COLUMNS = (
     "quality_statistic",
     "quality_peak",
     "quality_flag",
+    "lensing_flag",
 )  # fmt: skip
 """Columns :func:`lens_table` adds to :data:`TABLE_COLUMNS`."""
 QUALITY_FILE = "quality.json"
@@ -239,6 +242,7 @@ def _fit_row(lens_folder: Path) -> dict:
         row["quality_statistic"] = _number(quality["significance"])
         row["quality_peak"] = _number(quality["peak"])
         row["quality_flag"] = bool(quality["flag"]) if quality["measured"] else pd.NA
+        row["lensing_flag"] = bool(quality["lensing"]["flag"])
     except FileNotFoundError as exc:
         raise ValueError(f"{lens_folder}: {exc.filename} not found") from exc
     except (json.JSONDecodeError, KeyError, TypeError) as exc:

@@ -33,8 +33,8 @@ from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.atomic import write_json
 from mgelens.imaging import Imaging, ImagingError
 from mgelens.mask import circular
-from mgelens.pipeline.phases import MODEL_FILE
-from mgelens.quality import quality_statistic
+from mgelens.pipeline.phases import MODEL_FILE, mass_model
+from mgelens.quality import lensing_check, quality_statistic
 from mgelens.search.results import RESULT_FILE
 
 logger = logging.getLogger(__name__)
@@ -93,6 +93,11 @@ def run(args: argparse.Namespace) -> int:
         statistic = quality_statistic(
             nresid, lensed, imaging.noise_map, imaging.mask, imaging.pixel_scale
         )
+        lensing = lensing_check(
+            mass_model(args.phase),
+            float(settings["mask_radius"]),
+            tuple(settings["slam"]["mask_centre"]),
+        )
     except (OSError, KeyError, ValueError, ImagingError) as exc:
         logger.error("quality of %s: %s", lens, exc)
         return 1
@@ -102,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
         "mgelens_version": __version__,
         "conventions": CONVENTIONS_VERSION,
         **statistic.to_dict(),
+        "lensing": lensing.to_dict(),
         "inputs": {"model": str(args.phase / MODEL_FILE), "lens_dir": str(lens_dir)},
     }
     write_json(args.out, record)
@@ -111,6 +117,8 @@ def run(args: argparse.Namespace) -> int:
         f"z_max = {statistic.peak:.2f} at ({statistic.worst_x:.2f}, {statistic.worst_y:.2f})″, "
         f"{statistic.n_blocks} blocks, {statistic.n_pixels} pixels"
     )
+    if lensing.flag:
+        print(f"{lens}: LENSING FLAG: {lensing.reason}")
     return 0
 
 
