@@ -41,10 +41,8 @@ reproduce the image itself, arcs included, with residuals of pure noise. Flagged
 tangential critical curve (SPEC §3.4) within ``mask_radius`` of the mask centre, or a
 needle-thin one, whose circle-equivalent radius √(area/π) is below
 :data:`MIN_CURVE_ROUNDNESS` of its half length (an elliptical curve of axis ratio q_c has
-the ratio √q_c: 0.45 for an SIE of q = 0.2, 0.6–0.9 for galaxy-like masses). On the first
-real lens (docs/slacs.md, slacs1020+1122) SP reached a mass without a curve (SIE q =
-0.027, θ_E = 5.3″) and SPix1 one with a needle curve (q = 0.0005, ratio 0.11), and the
-chain built on them.
+the ratio √q_c: 0.45 for an SIE of q = 0.2). Both are failure modes of SP on real data
+(docs/slacs.md, "First real lens").
 """
 
 import math
