@@ -524,8 +524,8 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     after = snakemake("-n", f"--configfile={config}", workdir=tmp_path)
     counts = job_counts(after.stdout + after.stderr)
     assert counts == {
-        "isophotes": 1, "overview": 1, "recovery": 1, "recovery_table": 1, "summary": 1,
-        "all": 1, "total": 6,
+        "fit_quality": 1, "isophotes": 1, "overview": 1, "recovery": 1, "recovery_table": 1,
+        "summary": 1, "all": 1, "total": 7,
     }  # fmt: skip
 
 
