@@ -10,8 +10,8 @@ import pytest
 from astropy.io import fits
 from matplotlib import colors
 from scipy.spatial import Voronoi
+from test_pipeline import small_mock
 
-from mgelens import simulate
 from mgelens.cli import main
 from mgelens.fit import fit
 from mgelens.geometry import ell_comps_from, to_profile_frame
@@ -220,20 +220,7 @@ def mock_dir(tmp_path_factory):
     """tests/test_pipeline.py's 31×31 M1-like mock at 0.1″ (noise ×100), with a contaminant:
     a bright 3×3 blob at (−0.7″, +0.5″) whose noise is the SLACS sentinel, and one pixel at
     (+0.5″, −0.5″) excluded by mask.fits."""
-    observation = simulate.Observation(
-        image_size=31,
-        pixel_scale=PIXEL,
-        sub_size=4,
-        psf_sigma=0.1,
-        psf_size=5,
-        source_plane_size=41,
-        source_plane_pixel_scale=0.05,
-    )
-    mock = simulate.simulate(simulate.paper_mock("M1"), observation)
-    imaging = mock.imaging
-    rng = np.random.default_rng(5)
-    noise = 100.0 * imaging.noise_map
-    data = mock.model + noise * rng.standard_normal(noise.shape)
+    data, noise, imaging = small_mock()
     data[19:22, 7:10] += 50.0
     noise[19:22, 7:10] = SENTINEL
     mask = np.zeros(noise.shape, dtype=bool)

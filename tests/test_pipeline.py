@@ -455,9 +455,9 @@ def test_sampler_for_raises_dynesty_live_points_to_its_minimum():
 
 
 # -- small mock and products ------------------------------------------------------------
-@pytest.fixture(scope="module")
-def mock_dir(tmp_path_factory):
-    """A 31×31 M1-like mock at 0.1″ with the noise raised 100× (a broad, fast posterior)."""
+def small_mock() -> tuple[np.ndarray, np.ndarray, Imaging]:
+    """Data and noise map of a 31×31 M1-like mock at 0.1″ with the noise raised 100× (a
+    broad, fast posterior), and the mock's noise-free imaging (PSF, unit)."""
     observation = simulate.Observation(
         image_size=31,
         pixel_scale=PIXEL,
@@ -468,10 +468,15 @@ def mock_dir(tmp_path_factory):
         source_plane_pixel_scale=0.05,
     )
     mock = simulate.simulate(simulate.paper_mock("M1"), observation)
-    imaging = mock.imaging
     rng = np.random.default_rng(5)
-    noise = 100.0 * imaging.noise_map
-    data = mock.model + noise * rng.standard_normal(noise.shape)
+    noise = 100.0 * mock.imaging.noise_map
+    return mock.model + noise * rng.standard_normal(noise.shape), noise, mock.imaging
+
+
+@pytest.fixture(scope="module")
+def mock_dir(tmp_path_factory):
+    """:func:`small_mock` as an imaging folder."""
+    data, noise, imaging = small_mock()
     folder = tmp_path_factory.mktemp("mock")
     Imaging(data, noise, imaging.psf, PIXEL, unit=imaging.unit).to_fits(folder)
     return folder
