@@ -48,7 +48,7 @@ from mgelens.fit import figure_of_merit, fit
 from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.pipeline import models
-from mgelens.pipeline.phases import load_dataset, unmasked_pixel_centres
+from mgelens.pipeline.phases import load_dataset
 from mgelens.pipeline.settings import profile_settings
 from mgelens.source.image_mesh import floored_adapt_image, overlay_centres
 
@@ -163,7 +163,7 @@ def phase_calls(lens_dir: Path, settings, einstein_radius: float, n_calls: int, 
     )
     spix1 = models.PhaseModel(sp_specs, overlay)
     adapt = floored_adapt_image(fit(dataset, spix1.build(values)).lensed_source_image)
-    px, py = unmasked_pixel_centres(dataset)
+    px, py = dataset.pixel_centres
     kmeans = models.KMeansSourceModel(
         px,
         py,

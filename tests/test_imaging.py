@@ -179,6 +179,35 @@ def test_pixel_scale_from_info_json(tmp_path: Path, caplog: pytest.LogCaptureFix
     assert "taken from info.json" in caplog.text
 
 
+def test_unit_from_info_json_when_header_has_no_bunit(tmp_path: Path) -> None:
+    folder = _write_folder(tmp_path / "slacs9999+0000", _arrays())
+    units = "electrons/s (HST ACS/WFC F814W drizzled; units inferred upstream)"
+    (folder / "info.json").write_text(json.dumps({"pixel_scale_arcsec": 0.05, "units": units}))
+    assert Imaging.from_folder(folder).unit == "electrons/s"
+    (folder / "info.json").write_text(json.dumps({"pixel_scale_arcsec": 0.05}))
+    assert Imaging.from_folder(folder).unit == ""
+
+
+def test_header_bunit_wins_over_info_json_units(tmp_path: Path) -> None:
+    imaging = _imaging(pixel_scale=0.05)
+    Imaging(imaging.data, imaging.noise_map, imaging.psf, 0.05, unit="counts").to_fits(tmp_path)
+    (tmp_path / "info.json").write_text(json.dumps({"units": "electrons/s"}))
+    assert Imaging.from_folder(tmp_path).unit == "counts"
+
+
+def test_unreadable_info_json_is_ignored_when_the_pixel_scale_is_given(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    folder = _write_folder(tmp_path / "lens", _arrays())
+    (folder / "info.json").write_text("{not json")
+    with caplog.at_level(logging.WARNING, logger="mgelens.imaging"):
+        imaging = Imaging.from_folder(folder, pixel_scale=0.05)
+    assert (imaging.pixel_scale, imaging.unit) == (0.05, "")
+    assert "cannot read JSON" in caplog.text
+    with pytest.raises(ImagingError, match="info.json: cannot read JSON"):
+        Imaging.from_folder(folder)
+
+
 def test_signal_to_noise_map() -> None:
     arrays = _arrays()
     arrays["noise_map"][0, 0] = 0.0
@@ -411,6 +440,7 @@ def test_every_slacs_lens_loads(slacs_dir: Path, caplog: pytest.LogCaptureFixtur
         assert abs(imaging.psf.sum() - 1.0) <= 1e-6, folder.name
         assert np.unravel_index(np.argmax(imaging.psf), imaging.psf.shape) == (7, 7)
         assert np.all(imaging.noise_map > 0), folder.name
+        assert imaging.unit == "electrons/s", folder.name
 
 
 def test_slacs0252_contaminant_sentinels(slacs_dir: Path) -> None:

@@ -162,6 +162,12 @@ class FitDataset:
         return self.imaging.data[~self.mask]
 
     @cached_property
+    def pixel_centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y) arcsec of the unmasked pixel centres, slim order."""
+        x, y = pixel_centres(self.mask.shape, self.imaging.pixel_scale)
+        return x[~self.mask], y[~self.mask]
+
+    @cached_property
     def noise_map(self) -> np.ndarray:
         return self.imaging.noise_map[~self.mask]
 

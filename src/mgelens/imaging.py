@@ -188,6 +188,7 @@ class Imaging:
         name: str = "",
         mask_path: str | os.PathLike | None = None,
         mask_from: Callable[[tuple[int, int], float], np.ndarray] | None = None,
+        unit: str = "",
     ) -> "Imaging":
         """Read an imaging data set from FITS files.
 
@@ -208,6 +209,8 @@ class Imaging:
             ``mask_from(shape, pixel_scale)`` -> bool mask (True = excluded), combined with
             the mask file: e.g. a fit's circle, so that only the pixels the fit uses must
             hold finite data and a positive noise.
+        unit : str
+            Brightness unit to use when the data header has no ``BUNIT`` ("" = unknown).
 
         Raises
         ------
@@ -233,7 +236,7 @@ class Imaging:
                 mask = region
             elif np.shape(mask) == np.shape(region):  # else the check names the mask file
                 mask = mask | region
-        unit = str(header.get("BUNIT", "")).strip()
+        unit = str(header.get("BUNIT", "")).strip() or unit
         try:
             return cls(data, noise_map, psf, scale, mask=mask, name=name, unit=unit)
         except ImagingError as exc:
@@ -261,7 +264,9 @@ class Imaging:
             The folder.
         pixel_scale : float, optional
             Arcsec/pixel. If omitted, ``pixel_scale_arcsec`` of a sibling ``info.json`` is
-            used (logged), else the data header (see :meth:`from_fits`).
+            used (logged), else the data header (see :meth:`from_fits`). The brightness
+            unit is the data header's ``BUNIT``, else the ``units`` of ``info.json`` up to
+            its first parenthesis (``"electrons/s (HST ...)"`` → ``electrons/s``).
         hdu : int
             HDU holding the images (see :meth:`from_fits`).
         name : str, optional
@@ -275,8 +280,9 @@ class Imaging:
                 f"{folder}: imaging folder not found; expected a folder holding "
                 f"{DATA_FILE}, {NOISE_MAP_FILE} and {PSF_FILE}"
             )
+        info = _read_info(folder / INFO_FILE, pixel_scale is not None)
         if pixel_scale is None:
-            pixel_scale = _info_pixel_scale(folder / INFO_FILE)
+            pixel_scale = _info_pixel_scale(info, folder / INFO_FILE)
         mask_path = folder / MASK_FILE
         return cls.from_fits(
             folder / DATA_FILE,
@@ -287,6 +293,7 @@ class Imaging:
             name=folder.resolve().name if name is None else name,
             mask_path=mask_path if mask_path.is_file() else None,
             mask_from=mask_from,
+            unit=_info_unit(info),
         )
 
     def to_fits(self, folder: str | os.PathLike) -> Path:
@@ -609,17 +616,35 @@ def _resolve_pixel_scale(explicit: float | None, from_header: float | None, path
     return scale
 
 
-def _info_pixel_scale(path: Path) -> float | None:
-    """``pixel_scale_arcsec`` of an ``info.json`` (logged), or None if absent."""
+def _read_info(path: Path, pixel_scale_given: bool) -> dict:
+    """The content of an ``info.json`` ({} if absent or not a JSON object).
+
+    An unreadable file is an error only when the pixel scale must come from it; otherwise
+    it is logged and ignored (it then gives no brightness unit).
+    """
     if not path.is_file():
-        return None
+        return {}
     try:
         info = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
+        if pixel_scale_given:
+            logger.warning("%s: cannot read JSON (%s); its brightness unit is not used", path, exc)
+            return {}
         raise ImagingError(
             f"{path}: cannot read JSON ({exc}); fix the file or pass pixel_scale="
         ) from exc
-    value = info.get("pixel_scale_arcsec") if isinstance(info, dict) else None
+    return info if isinstance(info, dict) else {}
+
+
+def _info_unit(info: dict) -> str:
+    """The brightness unit of ``info["units"]``: its text before the first "(", stripped."""
+    units = info.get("units")
+    return units.split("(", 1)[0].strip() if isinstance(units, str) else ""
+
+
+def _info_pixel_scale(info: dict, path: Path) -> float | None:
+    """``pixel_scale_arcsec`` of the ``info.json`` at ``path`` (logged), or None if absent."""
+    value = info.get("pixel_scale_arcsec")
     if value is None:
         return None
     scale = _checked_pixel_scale(value, f"{path}: pixel_scale_arcsec")

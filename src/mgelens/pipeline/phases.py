@@ -64,7 +64,7 @@ from mgelens.grid import pixel_centres
 from mgelens.imaging import DATA_FILE, INFO_FILE, MASK_FILE, Imaging
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
-from mgelens.pipeline import fittable, models, products
+from mgelens.pipeline import fittable, models, products, sp_start
 from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
 from mgelens.provenance import code_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -259,12 +259,6 @@ def _imaging_files(lens_dir: Path) -> list[Path]:
     return [lens_dir / f for f in IMAGING_FILES if (lens_dir / f).is_file()]
 
 
-def unmasked_pixel_centres(dataset: FitDataset) -> tuple[np.ndarray, np.ndarray]:
-    """(x, y) arcsec of the unmasked pixel centres, slim order."""
-    x, y = pixel_centres(dataset.mask.shape, dataset.imaging.pixel_scale)
-    return x[~dataset.mask], y[~dataset.mask]
-
-
 # -- one phase ---------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class PhaseProblem:
@@ -375,28 +369,33 @@ def sampler_for(settings: SamplerSettings, n_free: int) -> SamplerSettings:
     return settings
 
 
-def checkpoint_fingerprint(
-    problem: PhaseProblem, sampler: SamplerSettings, seed: int, checksums: dict
-) -> dict:
-    """Everything a phase's sampling depends on, for naming its checkpoint: a checkpoint
-    resumes only a fit of the same likelihood, priors, sampler and seed.
-
-    Holds the parameter space, the model (lens-light sets, source mesh, regularization,
-    interpolation), the fit settings, a hash of the mask, the positions penalty, the
-    sampler settings, the seed, the input checksums and the package version.
-    """
+def problem_fingerprint(problem: PhaseProblem, checksums: dict) -> dict:
+    """Everything a phase's likelihood and priors depend on: the parameter space, the model
+    (lens-light sets, source mesh, regularization, interpolation), the fit settings, a hash
+    of the mask, the positions penalty, the input checksums and the package version."""
     mask = np.ascontiguousarray(problem.dataset.mask)
     return {
         "phase": problem.name,
         "space": problem.space.to_dict(),
         "model": problem.model.describe(),
-        "sampler": sampler.result_settings(),
-        "seed": seed,
         "fit": dataclasses.asdict(problem.dataset.settings),
         "mask": hashlib.sha256(mask.tobytes() + str(mask.shape).encode()).hexdigest(),
         "positions": None if problem.positions is None else problem.positions.describe(),
         "inputs": checksums,
         "version": code_version(),
+    }
+
+
+def checkpoint_fingerprint(
+    problem: PhaseProblem, sampler: SamplerSettings, seed: int, checksums: dict
+) -> dict:
+    """Everything a phase's sampling depends on, for naming its checkpoint: a checkpoint
+    resumes only a fit of the same likelihood, priors, sampler and seed
+    (:func:`problem_fingerprint`, the sampler settings and the seed)."""
+    return {
+        **problem_fingerprint(problem, checksums),
+        "sampler": sampler.result_settings(),
+        "seed": seed,
     }
 
 
@@ -753,7 +752,7 @@ def _kmeans_source(
     if not path.is_file():
         raise PhaseInputError(f"{path} not found: rerun phase 'spix1'")
     adapt = products.read_adapt_image(path, dataset.mask)
-    x, y = unmasked_pixel_centres(dataset)
+    x, y = dataset.pixel_centres
     source = models.KMeansSourceModel(
         x,
         y,
@@ -900,7 +899,28 @@ def run_phase(
             first.mask_radius,
             first.space.n_free,
         )
+        if name == "sp" and settings.sp_start == "search":
+            problems = [started_sp(first, folder)]
         return _solve(problems, folder, settings, seed, lens_dir)
+
+
+def started_sp(problem: PhaseProblem, folder: Path) -> PhaseProblem:
+    """SP's problem with its priors passed from the arcs' start (:mod:`sp_start`), read
+    from ``folder/start.json`` when it was found for the same inputs and settings."""
+    fingerprint = problem_fingerprint(problem, input_checksums(problem.inputs))
+    likelihood = PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    start = sp_start.read_or_search(
+        folder,
+        fingerprint,
+        lambda: sp_start.search(
+            problem.dataset,
+            problem.space,
+            problem.model,
+            likelihood,
+            problem.mask_radius,
+        ),
+    )
+    return dataclasses.replace(problem, space=sp_start.started_space(problem.space, start))
 
 
 def chain_settings(name: str, settings: SlamSettings) -> list[SlamSettings]:

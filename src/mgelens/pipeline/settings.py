@@ -54,6 +54,7 @@ KMEANS_SCHEMES = ("2023", "2024")
 CROSS_OFFSETS = ("anchor", "paper")
 INTERPOLATIONS = ("natural_neighbour", "nearest")
 PRIOR_PASSING_RULES = ("paper", "2024")
+SP_STARTS = ("prior", "search")
 
 
 class SettingsError(ValueError):
@@ -122,6 +123,11 @@ class SlamSettings:
         (:func:`mgelens.source.regularization.adaptive_pixel_signals`).
     prior_passing : {"paper", "2024"}
         Prior-passing rule (SPEC §8.2).
+    sp_start : {"prior", "search"}
+        SP's priors: the anchor's (``prior``, SPEC §3, §8.1; the paper profile), or SLaM's
+        passed priors around a maximum-a-posteriori point found from the lensed arcs
+        before sampling (``search``, quick; :mod:`mgelens.pipeline.sp_start`), without
+        which SP settled in a degenerate mass on real imaging (docs/slacs.md).
     positions_penalty : bool
         Require the multiple images of SP's source centre to re-converge in the source
         plane in SPix1 and MASS (SPEC §12.21; off in the paper profile, on in quick, where
@@ -174,6 +180,7 @@ class SlamSettings:
     cross_offset: str = "anchor"
     adaptive_signals: str = "anchor"
     prior_passing: str = "paper"
+    sp_start: str = "prior"
     positions_penalty: bool = False
     positions_factor: float = 3.0
     positions_minimum: float = 0.2
@@ -263,6 +270,7 @@ _CHOICES = {
     "adaptive_signals": SIGNAL_AVERAGES,
     "edge_rule": EDGE_RULES,
     "prior_passing": PRIOR_PASSING_RULES,
+    "sp_start": SP_STARTS,
 }
 """Fields taking one of a few strings."""
 _INTEGERS = {
@@ -331,6 +339,7 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
         "quick": SlamSettings(
             profile="quick",
             positions_penalty=True,
+            sp_start="search",
             edge_rule="continuous",
             force_edge_pixels_to_zero=False,
             adaptive_signals="weighted",

@@ -1,0 +1,373 @@
+"""SP's start: a maximum-a-posteriori point found from the lensed arcs, whose
+neighbourhood becomes SP's prior (``slam.sp_start: search``).
+
+With the anchor priors alone (θ_E U(0, 8″), mass centre N(c, 0.1″), shear U(±0.2)), SP's
+nested sampler can settle in a degenerate mass on real imaging, where the arcs are faint
+against the lens light and the 20-Gaussian source absorbs light residuals wherever the
+mass puts it (a needle of q 0.03 and θ_E 5.3″ on slacs1020+1122, 750 in ln L below the
+true basin; docs/slacs.md). Local optimisers started from round masses fall into the
+same traps. The arcs themselves say where the mass is:
+
+1. **Lens light.** The lens-light geometry (shared centre within ±0.3″ of its prior
+   mean, ell_comps within ±0.6) maximises ln L + ln prior (Powell, :data:`LIGHT_CALLS`
+   evaluations) under a mass of θ_E 0.01″, which lenses nothing: the source Gaussians sit
+   on the centre as extra lens light.
+2. **Arcs.** Pixels whose normalised residual of that fit exceeds
+   :data:`ARC_SIGNIFICANCE`, between :data:`ARC_INNER_RADIUS` and 0.9 R of the light
+   centre (R the mask radius), each weighted by its residual flux.
+3. **Mass from the arcs.** Traced back through a singular isothermal sphere at the light
+   centre, the arc pixels of one source land close together only for the right θ_E:
+   θ_E is the value of a grid of 40 (0.2″ to 0.9 R, geometric) whose weighted
+   source-plane scatter, in units of θ_E², is least. The SIE ellipticity and shear then
+   refine that scatter (Powell; θ_E within 0.8–1.25×, |e| ≤ 0.3, |γ| ≤ 0.1), and the
+   source centre is the weighted mean of the traced pixels.
+4. **Polish.** Powell over every SP parameter, ln L + ln prior, from that point
+   (:data:`POLISH_CALLS` evaluations).
+
+Each free SP parameter then gets SLaM's passed prior around the polished point
+(:func:`~mgelens.search.priors.passed_prior`, SPEC §8.2: N(value, w) truncated to its
+limits, w the width modifier: centres 0.05″, ell_comps 0.2, θ_E 25 %, shear 0.05). With
+fewer than :data:`MIN_ARC_PIXELS` arc pixels the anchor priors stay (logged). The search
+is deterministic and its record (``start.json`` in SP's folder) is reused when SP reruns
+on the same inputs and settings, so a resumed SP samples the same priors.
+"""
+
+import json
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import optimize
+
+from mgelens.atomic import write_json
+from mgelens.fit import FitDataset, fit
+from mgelens.mass import SIE, ExternalShear, ray_trace
+from mgelens.pipeline import models
+from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
+from mgelens.search.model import ParameterSpace
+from mgelens.search.priors import passed_prior
+
+logger = logging.getLogger(__name__)
+
+START_FILE = "start.json"
+"""SP's start record in its folder."""
+
+LIGHT_CALLS = 400
+"""Evaluations of the lens-light stage (17 parameters of SP: 6 light)."""
+POLISH_CALLS = 1500
+"""Evaluations of the final all-parameter polish."""
+NO_LENSING_EINSTEIN_RADIUS = 0.01
+"""θ_E (arcsec) of the lens-light stage's mass."""
+LIGHT_CENTRE_RANGE = 0.3
+"""Half-width (arcsec) of the lens-light stage's box around the light centre's prior mean."""
+LIGHT_ELL_COMPS_RANGE = 0.6
+"""Bound of |ell_comps| in the lens-light stage."""
+ARC_SIGNIFICANCE = 3.0
+"""Normalised residual above which a pixel of the light-only fit is an arc pixel."""
+ARC_INNER_RADIUS = 0.25
+"""Arc pixels lie at least this far (arcsec) from the light centre."""
+ARC_OUTER_FRACTION = 0.9
+"""... and within this fraction of the mask radius."""
+MIN_ARC_PIXELS = 10
+"""Fewer arc pixels and the anchor priors stay."""
+OPTIMISER_FLOOR = -1e30
+"""ln P the optimiser sees for rejected or non-finite points."""
+EINSTEIN_RADIUS_GRID = 40
+"""Grid points of the isothermal-sphere scan, 0.2″ to 0.9 R."""
+
+
+@dataclass(frozen=True)
+class ArcMass:
+    """The mass and source centre the arc pixels point to (step 3).
+
+    Attributes
+    ----------
+    n_pixels : int
+        Arc pixels used.
+    sphere_einstein_radius : float
+        θ_E (arcsec) of the best isothermal sphere on the grid.
+    einstein_radius, ell_comps_1, ell_comps_2, gamma_1, gamma_2 : float
+        The refined SIE + shear (arcsec; dimensionless).
+    source_x, source_y : float
+        Weighted mean of the traced arc pixels (arcsec).
+    scatter : float
+        Weighted rms source-plane distance of the traced arc pixels from that mean (arcsec).
+    """
+
+    n_pixels: int
+    sphere_einstein_radius: float
+    einstein_radius: float
+    ell_comps_1: float
+    ell_comps_2: float
+    gamma_1: float
+    gamma_2: float
+    source_x: float
+    source_y: float
+    scatter: float
+
+
+@dataclass(frozen=True)
+class SPStart:
+    """The start search's record (``start.json``).
+
+    Attributes
+    ----------
+    values : dict or None
+        Polished free-parameter values; ``None`` if too few arc pixels were found.
+    log_posterior : float or None
+        ln L + ln prior (anchor priors) at ``values``.
+    light_log_posterior : float
+        ln L + ln prior after the lens-light stage.
+    arcs : ArcMass or None
+    n_arc_pixels : int
+    n_calls : int
+        Likelihood evaluations of the whole search.
+    seconds : float
+        Wall time of the search.
+    """
+
+    values: dict | None
+    log_posterior: float | None
+    light_log_posterior: float
+    arcs: ArcMass | None
+    n_arc_pixels: int
+    n_calls: int
+    seconds: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, content: dict) -> "SPStart":
+        arcs = content["arcs"]
+        return cls(**{**content, "arcs": None if arcs is None else ArcMass(**arcs)})
+
+
+class _Posterior:
+    """ln L + ln prior of a free vector, counting evaluations; −1e99 off the prior."""
+
+    def __init__(self, likelihood: Callable[[np.ndarray], float], space: ParameterSpace):
+        self.likelihood, self.space, self.calls = likelihood, space, 0
+
+    def __call__(self, x: np.ndarray) -> float:
+        self.calls += 1
+        prior = self.space.log_prior(x)
+        if not np.isfinite(prior):
+            return REJECTED_LOG_LIKELIHOOD
+        return self.likelihood(x) + prior
+
+
+def _maximise(
+    posterior: _Posterior,
+    x: np.ndarray,
+    free: Sequence[int],
+    bounds: Sequence[tuple[float, float]] | None,
+    max_calls: int,
+) -> tuple[np.ndarray, float]:
+    """The best point Powell visits maximising ``posterior`` over the entries ``free`` of
+    ``x`` (within ``bounds`` if given), and its value.
+
+    Rejected points count as :data:`OPTIMISER_FLOOR` (−1e30): the −1e99 of a rejected
+    sample overflows Brent's parabolic steps into NaN. Bounded Powell stops after about
+    one sweep of its directions (on M1's polish: 200 calls, ln P −57,754 where the
+    unbounded search reached −7,602 in 1,500), so the polish leaves the support to the
+    prior (outside it the posterior is the floor).
+    """
+    free = list(free)
+    best = {"value": -np.inf, "x": x.copy()}
+
+    def negative(y: np.ndarray) -> float:
+        z = x.copy()
+        z[free] = y
+        value = posterior(z)
+        if not value > OPTIMISER_FLOOR:
+            return -OPTIMISER_FLOOR
+        if value > best["value"]:
+            best["value"], best["x"] = value, z
+        return -value
+
+    start = x[free] if bounds is None else np.clip(x[free], *np.transpose(bounds))
+    optimize.minimize(
+        negative,
+        start,
+        method="Powell",
+        bounds=bounds,
+        options={"maxfev": max_calls, "xtol": 1e-3, "ftol": 1e-9},
+    )
+    return best["x"], float(best["value"])
+
+
+def _light_bounds(space: ParameterSpace, index: int) -> tuple[float, float]:
+    name = space.free_names[index]
+    if name.endswith(("centre_x", "centre_y")):
+        mean = float(space.priors[index].transform(0.5))
+        return mean - LIGHT_CENTRE_RANGE, mean + LIGHT_CENTRE_RANGE
+    if name.endswith(("ell_comps_1", "ell_comps_2")):
+        return -LIGHT_ELL_COMPS_RANGE, LIGHT_ELL_COMPS_RANGE
+    prior = space.priors[index]
+    return prior.lower, prior.upper
+
+
+def arc_pixels(
+    dataset: FitDataset, light_fit_values: dict, model: models.PhaseModel, radius: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, float]]:
+    """Arc pixels of the light-only fit at ``light_fit_values`` (step 2).
+
+    Returns
+    -------
+    x, y : ndarray
+        Arc pixel centres (arcsec).
+    weight : ndarray
+        Their residual flux (data units).
+    centre : (float, float)
+        The lens-light centre (arcsec).
+    """
+    result = fit(dataset, model.build(light_fit_values))
+    prefix = next(n[: -len(".centre_x")] for n in light_fit_values if n.endswith(".centre_x"))
+    centre = (light_fit_values[f"{prefix}.centre_x"], light_fit_values[f"{prefix}.centre_y"])
+    px, py = dataset.pixel_centres
+    distance = np.hypot(px - centre[0], py - centre[1])
+    chosen = (
+        (result.normalized_residuals > ARC_SIGNIFICANCE)
+        & (distance > ARC_INNER_RADIUS)
+        & (distance < ARC_OUTER_FRACTION * radius)
+    )
+    return px[chosen], py[chosen], result.residuals[chosen], centre
+
+
+def _traced(parameters: Sequence[float], centre, x, y) -> tuple[np.ndarray, np.ndarray]:
+    einstein_radius, e1, e2, g1, g2 = parameters
+    sie = SIE.from_ell_comps(centre, (e1, e2), einstein_radius)
+    return ray_trace((sie, ExternalShear(g1, g2)), x, y)
+
+
+def _scatter(parameters, centre, x, y, weight) -> tuple[float, float, float]:
+    """(weighted mean source x, y, weighted mean squared distance from it)."""
+    bx, by = _traced(parameters, centre, x, y)
+    mx, my = np.average(bx, weights=weight), np.average(by, weights=weight)
+    return mx, my, float(np.average((bx - mx) ** 2 + (by - my) ** 2, weights=weight))
+
+
+def arc_mass(x, y, weight, centre: tuple[float, float], radius: float) -> ArcMass:
+    """The SIE + shear and source centre under which the arc pixels trace to one place
+    (step 3; arcsec)."""
+
+    def relative(parameters) -> float:
+        return _scatter(parameters, centre, x, y, weight)[2] / parameters[0] ** 2
+
+    grid = np.geomspace(0.2, ARC_OUTER_FRACTION * radius, EINSTEIN_RADIUS_GRID)
+    sphere = float(grid[np.argmin([relative((t, 0.0, 0.0, 0.0, 0.0)) for t in grid])])
+    with np.errstate(invalid="ignore"):
+        refined = optimize.minimize(
+            relative,
+            [sphere, 0.0, 0.0, 0.0, 0.0],
+            method="Powell",
+            bounds=[(0.8 * sphere, 1.25 * sphere), (-0.3, 0.3), (-0.3, 0.3), (-0.1, 0.1),
+                    (-0.1, 0.1)],
+        )  # fmt: skip
+    parameters = [float(v) for v in refined.x]
+    sx, sy, mean_square = _scatter(parameters, centre, x, y, weight)
+    return ArcMass(len(x), sphere, *parameters, float(sx), float(sy), float(np.sqrt(mean_square)))
+
+
+def _arc_start(values: dict, arcs: ArcMass, centre: tuple[float, float]) -> dict:
+    return {
+        **values,
+        "mass.centre_x": centre[0],
+        "mass.centre_y": centre[1],
+        "mass.einstein_radius": arcs.einstein_radius,
+        "mass.ell_comps_1": arcs.ell_comps_1,
+        "mass.ell_comps_2": arcs.ell_comps_2,
+        "shear.gamma_1": arcs.gamma_1,
+        "shear.gamma_2": arcs.gamma_2,
+        f"{models.SOURCE}.set_0.centre_x": arcs.source_x,
+        f"{models.SOURCE}.set_0.centre_y": arcs.source_y,
+    }
+
+
+def search(
+    dataset: FitDataset,
+    space: ParameterSpace,
+    model: models.PhaseModel,
+    likelihood: Callable[[np.ndarray], float],
+    radius: float,
+) -> SPStart:
+    """Run steps 1–4 on SP's problem (its anchor-prior ``space``); see the module."""
+    began = time.perf_counter()
+    posterior = _Posterior(likelihood, space)
+    names = space.free_names
+    x = space.prior_transform(np.full(space.n_free, 0.5))
+    x[names.index("mass.einstein_radius")] = NO_LENSING_EINSTEIN_RADIUS
+    light = [i for i, n in enumerate(names) if n.startswith(models.LENS_LIGHT + ".")]
+    x, light_value = _maximise(
+        posterior, x, light, [_light_bounds(space, i) for i in light], LIGHT_CALLS
+    )
+    values = space.values(x)
+    ax, ay, weight, centre = arc_pixels(dataset, values, model, radius)
+    logger.info(
+        "SP start: lens light ln P %.1f after %d calls; %d arc pixels",
+        light_value,
+        posterior.calls,
+        len(ax),
+    )
+    if len(ax) < MIN_ARC_PIXELS:
+        logger.warning(
+            "SP start: %d arc pixels (fewer than %d): SP keeps the anchor priors",
+            len(ax),
+            MIN_ARC_PIXELS,
+        )
+        return SPStart(None, None, light_value, None, len(ax), posterior.calls,
+                       time.perf_counter() - began)  # fmt: skip
+    arcs = arc_mass(ax, ay, weight, centre, radius)
+    x = space.vector(_arc_start(values, arcs, centre))
+    x, value = _maximise(posterior, x, range(space.n_free), None, POLISH_CALLS)
+    found = dict(zip(names, x.tolist(), strict=True))
+    logger.info(
+        "SP start: arcs θ_E %.3f″ (sphere %.3f″), source (%.3f, %.3f)″; polished ln P %.1f, "
+        "θ_E %.3f″, %d calls",
+        arcs.einstein_radius,
+        arcs.sphere_einstein_radius,
+        arcs.source_x,
+        arcs.source_y,
+        value,
+        found["mass.einstein_radius"],
+        posterior.calls,
+    )
+    return SPStart(found, value, light_value, arcs, len(ax), posterior.calls,
+                   time.perf_counter() - began)  # fmt: skip
+
+
+def started_space(space: ParameterSpace, start: SPStart) -> ParameterSpace:
+    """``space`` with every free parameter's prior passed from the start (SPEC §8.2 width
+    modifiers; the anchor space if the search found no arcs)."""
+    if start.values is None:
+        return space
+    for name in space.free_names:
+        limits = space.parameter(name).limits
+        value = float(np.clip(start.values[name], *limits))
+        space = space.with_prior(name, passed_prior(name, value, 0.0, limits, "2024"))
+    return space
+
+
+def read_or_search(folder: Path, fingerprint: dict, run: Callable[[], SPStart]) -> SPStart:
+    """The start recorded in ``folder/start.json`` for ``fingerprint`` (the inputs and
+    settings it was found for), else ``run()``'s, written there atomically with it."""
+    path = folder / START_FILE
+    fingerprint = json.loads(json.dumps(fingerprint))  # as read back from JSON
+    if path.is_file():
+        try:
+            content = json.loads(path.read_text())
+            recorded = SPStart.from_dict(content["start"])
+        except (ValueError, KeyError, TypeError) as error:
+            logger.warning("%s unreadable (%s): searching again", path, error)
+        else:
+            if content.get("fingerprint") == fingerprint:
+                logger.info("SP start read from %s", path)
+                return recorded
+            logger.info("%s was found for other inputs or settings: searching again", path)
+    start = run()
+    write_json(path, {"start": start.to_dict(), "fingerprint": fingerprint})
+    return start

@@ -1,0 +1,180 @@
+"""SP's start from the lensed arcs (mgelens.pipeline.sp_start): the arcs' mass against the
+SIE that made them, the whole search against a mock's truth, the passed priors, the
+fallback without arcs, and the reuse of start.json."""
+
+import json
+
+import numpy as np
+import pytest
+
+from mgelens import simulate
+from mgelens.fit import FitDataset
+from mgelens.grid import pixel_centres
+from mgelens.imaging import Imaging
+from mgelens.mass import SIE, ExternalShear, ray_trace
+from mgelens.pipeline import models, phases, sp_start
+from mgelens.pipeline.settings import profile_settings, settings_from_mapping
+from mgelens.search.priors import TruncatedGaussian, passed_prior
+
+PIXEL = 0.1
+MASK_RADIUS = 2.0
+
+
+def test_arc_mass_recovers_the_sie_shear_and_source_that_made_the_arcs():
+    centre = (0.05, -0.03)
+    sie = SIE.from_ell_comps(centre, (0.08, -0.05), 1.15)
+    shear = ExternalShear(0.03, -0.02)
+    source = (0.12, -0.08)
+    x, y = pixel_centres((121, 121), 0.025)
+    bx, by = ray_trace((sie, shear), x.ravel(), y.ravel())
+    # the pixels of a 0.06″ source (an extended source, as arcs are) and their "flux"
+    distance = np.hypot(bx - source[0], by - source[1])
+    arc = distance < 0.06
+    weight = np.exp(-0.5 * (distance[arc] / 0.03) ** 2)
+    assert arc.sum() > 100
+    arcs = sp_start.arc_mass(x.ravel()[arc], y.ravel()[arc], weight, centre, MASK_RADIUS)
+    # the isothermal-sphere scan alone lands within 10 %; the refinement within 2 %
+    assert abs(arcs.sphere_einstein_radius / 1.15 - 1) < 0.10
+    assert abs(arcs.einstein_radius / 1.15 - 1) < 0.02
+    assert np.hypot(arcs.source_x - source[0], arcs.source_y - source[1]) < 0.03
+    assert arcs.scatter < 0.05
+    assert arcs.n_pixels == arc.sum()
+    # a wrong θ_E scatters the traced pixels: the scan has something to find
+    wrong = sp_start._scatter((0.8, 0.0, 0.0, 0.0, 0.0), centre, x.ravel()[arc],
+                              y.ravel()[arc], weight)[2]  # fmt: skip
+    assert np.sqrt(wrong) > 5 * arcs.scatter
+
+
+def _mock_folder(folder, noise_factor: float, with_source: bool = True):
+    """M1 at 0.1″ in a 45×45 image; the noise raised ``noise_factor`` times; without its
+    source if ``with_source`` is False (lens light only)."""
+    observation = simulate.Observation(
+        image_size=45,
+        pixel_scale=PIXEL,
+        sub_size=4,
+        psf_sigma=0.1,
+        psf_size=5,
+        source_plane_size=81,
+        source_plane_pixel_scale=0.025,
+    )
+    mock = simulate.simulate(simulate.paper_mock("M1"), observation)
+    model = mock.model if with_source else mock.model - mock.lensed_source_blurred
+    noise = noise_factor * mock.imaging.noise_map
+    data = model + noise * np.random.default_rng(3).standard_normal(noise.shape)
+    Imaging(data, noise, mock.imaging.psf, PIXEL, unit=mock.imaging.unit).to_fits(folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def mock_problem(tmp_path_factory):
+    folder = _mock_folder(tmp_path_factory.mktemp("m1_start"), noise_factor=3.0)
+    settings = settings_from_mapping({"mask_radius": MASK_RADIUS})
+    return phases.sp_problem(folder, folder, settings)
+
+
+def _search(problem):
+    likelihood = phases.PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    return sp_start.search(
+        problem.dataset, problem.space, problem.model, likelihood, problem.mask_radius
+    )
+
+
+@pytest.fixture(scope="module")
+def mock_start(mock_problem):
+    return _search(mock_problem)
+
+
+def test_search_finds_the_mocks_mass_from_nothing_but_the_data(mock_problem, mock_start):
+    truth = simulate.paper_mock("M1").mass[0]
+    values = mock_start.values
+    # M1's EPL (γ 2.1, θ_E 1.2″) seen by an SIE: θ_E 1.18″ in M1's full SP
+    assert abs(values["mass.einstein_radius"] / truth.einstein_radius - 1) < 0.05
+    # within 1.5 pixels of the truth: the sampler's centre prior (σ 0.05″) reaches it
+    assert np.hypot(values["mass.centre_x"] - truth.centre[0],
+                    values["mass.centre_y"] - truth.centre[1]) < 0.15  # fmt: skip
+    q = (1 - np.hypot(values["mass.ell_comps_1"], values["mass.ell_comps_2"])) / (
+        1 + np.hypot(values["mass.ell_comps_1"], values["mass.ell_comps_2"])
+    )
+    assert abs(q - truth.axis_ratio) < 0.1
+    assert mock_start.n_arc_pixels >= sp_start.MIN_ARC_PIXELS
+    assert mock_start.n_calls <= sp_start.LIGHT_CALLS + sp_start.POLISH_CALLS + 50
+    # the polished point beats the anchor-prior medians and the arcs' start
+    space = mock_problem.space
+    likelihood = phases.PhaseLikelihood(mock_problem.dataset, space, mock_problem.model)
+    medians = space.prior_transform(np.full(space.n_free, 0.5))
+    x = space.vector(values)
+    assert mock_start.log_posterior == pytest.approx(likelihood(x) + space.log_prior(x))
+    assert mock_start.log_posterior > likelihood(medians) + space.log_prior(medians) + 1000
+
+
+def test_started_space_passes_each_free_parameter_with_slams_width(mock_problem, mock_start):
+    space = sp_start.started_space(mock_problem.space, mock_start)
+    assert space.free_names == mock_problem.space.free_names
+    for name in space.free_names:
+        prior = space.parameter(name).prior
+        limits = mock_problem.space.parameter(name).limits
+        assert isinstance(prior, TruncatedGaussian)
+        assert prior == passed_prior(name, mock_start.values[name], 0.0, limits, "2024")
+    theta = space.parameter("mass.einstein_radius").prior
+    assert theta.sigma == pytest.approx(0.25 * mock_start.values["mass.einstein_radius"])
+    assert space.parameter("mass.centre_x").prior.sigma == 0.05
+    assert space.parameter("shear.gamma_1").prior.sigma == 0.05
+
+
+def test_lens_light_alone_has_no_arcs_and_keeps_the_anchor_priors(tmp_path):
+    folder = _mock_folder(tmp_path, noise_factor=3.0, with_source=False)
+    problem = phases.sp_problem(folder, folder, settings_from_mapping({"mask_radius": 2.0}))
+    start = _search(problem)
+    assert start.values is None
+    assert start.arcs is None
+    assert start.n_arc_pixels < sp_start.MIN_ARC_PIXELS
+    assert start.n_calls <= sp_start.LIGHT_CALLS + 50
+    assert sp_start.started_space(problem.space, start) is problem.space
+
+
+def test_start_json_is_reused_for_the_same_fingerprint_only(tmp_path, mock_start):
+    runs = []
+
+    def run():
+        runs.append(1)
+        return mock_start
+
+    fingerprint = {"inputs": {"data.fits": "abc"}, "mask_centre": (0.0, 0.0)}
+    first = sp_start.read_or_search(tmp_path, fingerprint, run)
+    again = sp_start.read_or_search(tmp_path, fingerprint, run)
+    assert len(runs) == 1
+    assert again.values == first.values
+    assert again.arcs == first.arcs
+    recorded = json.loads((tmp_path / sp_start.START_FILE).read_text())
+    assert recorded["start"]["n_calls"] == mock_start.n_calls
+    assert recorded["fingerprint"] == {"inputs": {"data.fits": "abc"}, "mask_centre": [0, 0]}
+    sp_start.read_or_search(tmp_path, {**fingerprint, "inputs": {"data.fits": "xyz"}}, run)
+    assert len(runs) == 2
+    (tmp_path / sp_start.START_FILE).write_text("{broken")
+    sp_start.read_or_search(tmp_path, fingerprint, run)
+    assert len(runs) == 3
+
+
+def test_quick_profile_starts_sp_from_the_search_and_paper_from_the_anchor_priors():
+    assert profile_settings("quick").sp_start == "search"
+    assert profile_settings("paper").sp_start == "prior"
+    with pytest.raises(ValueError, match=r"slam\.sp_start"):
+        settings_from_mapping({"sp_start": "grid"})
+
+
+def test_light_stage_stays_in_its_box(mock_problem):
+    space = mock_problem.space
+    for i, name in enumerate(space.free_names):
+        if not name.startswith(models.LENS_LIGHT):
+            continue
+        lower, upper = sp_start._light_bounds(space, i)
+        mean = float(space.priors[i].transform(0.5))
+        assert lower < mean < upper
+        assert upper - lower <= 2 * sp_start.LIGHT_ELL_COMPS_RANGE + 1e-12
+
+
+def test_dataset_pixel_centres_are_the_unmasked_pixels(mock_problem):
+    dataset: FitDataset = mock_problem.dataset
+    x, y = dataset.pixel_centres
+    assert x.shape == dataset.data.shape
+    assert np.all(np.hypot(x, y) <= MASK_RADIUS + PIXEL)
