@@ -204,7 +204,7 @@ def test_unreadable_info_json_is_ignored_when_the_pixel_scale_is_given(
         imaging = Imaging.from_folder(folder, pixel_scale=0.05)
     assert (imaging.pixel_scale, imaging.unit) == (0.05, "")
     assert "cannot read JSON" in caplog.text
-    with pytest.raises(ImagingError, match="info.json: cannot read JSON"):
+    with pytest.raises(ImagingError, match=r"info\.json: cannot read JSON"):
         Imaging.from_folder(folder)
 
 
