@@ -2,7 +2,9 @@
 SIE that made them, the whole search against a mock's truth, the passed priors, the
 fallback without arcs, and the reuse of start.json."""
 
+import dataclasses
 import json
+import logging
 
 import numpy as np
 import pytest
@@ -66,10 +68,14 @@ def _mock_folder(folder, noise_factor: float, with_source: bool = True):
 
 
 @pytest.fixture(scope="module")
-def mock_problem(tmp_path_factory):
-    folder = _mock_folder(tmp_path_factory.mktemp("m1_start"), noise_factor=3.0)
+def mock_folder(tmp_path_factory):
+    return _mock_folder(tmp_path_factory.mktemp("m1_start"), noise_factor=3.0)
+
+
+@pytest.fixture(scope="module")
+def mock_problem(mock_folder):
     settings = settings_from_mapping({"mask_radius": MASK_RADIUS})
-    return phases.sp_problem(folder, folder, settings)
+    return phases.sp_problem(mock_folder, mock_folder, settings)
 
 
 def _search(problem):
@@ -153,6 +159,32 @@ def test_start_json_is_reused_for_the_same_fingerprint_only(tmp_path, mock_start
     (tmp_path / sp_start.START_FILE).write_text("{broken")
     sp_start.read_or_search(tmp_path, fingerprint, run)
     assert len(runs) == 3
+
+
+def test_sp_phase_samples_the_started_priors_and_reuses_its_start(
+    mock_folder, mock_start, tmp_path, caplog
+):
+    """run_phase("sp") under the quick profile: start.json written, result.json's priors
+    passed from it; a rerun reads it back instead of searching again (same priors, so a
+    checkpoint would resume). The sampler is capped: only the plumbing is tested here."""
+    settings = settings_from_mapping(
+        {"mask_radius": MASK_RADIUS, "allow_unconverged": True,
+         "samplers": {"sp": {"n_live": 36, "max_calls": 200, "progress_every": 1e9}}}
+    )  # fmt: skip
+    result = phases.run_phase("sp", mock_folder, tmp_path, settings)
+    recorded = json.loads((tmp_path / "sp" / sp_start.START_FILE).read_text())
+    assert recorded["start"]["values"] == pytest.approx(mock_start.values)
+    theta = result.space.parameter("mass.einstein_radius").prior
+    assert theta.mean == pytest.approx(mock_start.values["mass.einstein_radius"])
+    assert theta.sigma == pytest.approx(0.25 * theta.mean)
+    with caplog.at_level(logging.INFO, logger="mgelens.pipeline.sp_start"):
+        again = phases.run_phase("sp", mock_folder, tmp_path, settings)
+    assert "SP start read from" in caplog.text
+    assert again.space.to_dict() == result.space.to_dict()
+    paper = dataclasses.replace(settings, sp_start="prior")
+    anchor = phases.run_phase("sp", mock_folder, tmp_path / "paper", paper).space
+    assert anchor.parameter("mass.einstein_radius").prior == models.EINSTEIN_RADIUS_PRIOR
+    assert not (tmp_path / "paper" / "sp" / sp_start.START_FILE).exists()
 
 
 def test_quick_profile_starts_sp_from_the_search_and_paper_from_the_anchor_priors():
