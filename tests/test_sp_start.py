@@ -5,9 +5,11 @@ fallback without arcs, and the reuse of start.json."""
 import dataclasses
 import json
 import logging
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from mgelens import simulate
 from mgelens.fit import FitDataset
@@ -18,6 +20,7 @@ from mgelens.pipeline import models, phases, sp_start
 from mgelens.pipeline.settings import profile_settings, settings_from_mapping
 from mgelens.search.priors import TruncatedGaussian, passed_prior
 
+ROOT = Path(__file__).resolve().parents[1]
 PIXEL = 0.1
 MASK_RADIUS = 2.0
 
@@ -164,11 +167,11 @@ def test_start_json_is_reused_for_the_same_fingerprint_only(tmp_path, mock_start
 def test_sp_phase_samples_the_started_priors_and_reuses_its_start(
     mock_folder, mock_start, tmp_path, caplog
 ):
-    """run_phase("sp") under the quick profile: start.json written, result.json's priors
+    """run_phase("sp") with ``sp_start: search``: start.json written, result.json's priors
     passed from it; a rerun reads it back instead of searching again (same priors, so a
     checkpoint would resume). The sampler is capped: only the plumbing is tested here."""
     settings = settings_from_mapping(
-        {"mask_radius": MASK_RADIUS, "allow_unconverged": True,
+        {"mask_radius": MASK_RADIUS, "allow_unconverged": True, "sp_start": "search",
          "samplers": {"sp": {"n_live": 36, "max_calls": 200, "progress_every": 1e9}}}
     )  # fmt: skip
     result = phases.run_phase("sp", mock_folder, tmp_path, settings)
@@ -181,15 +184,18 @@ def test_sp_phase_samples_the_started_priors_and_reuses_its_start(
         again = phases.run_phase("sp", mock_folder, tmp_path, settings)
     assert "SP start read from" in caplog.text
     assert again.space.to_dict() == result.space.to_dict()
-    paper = dataclasses.replace(settings, sp_start="prior")
-    anchor = phases.run_phase("sp", mock_folder, tmp_path / "paper", paper).space
+    prior = dataclasses.replace(settings, sp_start="prior")
+    anchor = phases.run_phase("sp", mock_folder, tmp_path / "prior", prior).space
     assert anchor.parameter("mass.einstein_radius").prior == models.EINSTEIN_RADIUS_PRIOR
-    assert not (tmp_path / "paper" / "sp" / sp_start.START_FILE).exists()
+    assert not (tmp_path / "prior" / "sp" / sp_start.START_FILE).exists()
 
 
-def test_quick_profile_starts_sp_from_the_search_and_paper_from_the_anchor_priors():
-    assert profile_settings("quick").sp_start == "search"
+def test_the_real_samples_start_sp_from_the_search_and_the_profiles_from_the_priors():
+    assert profile_settings("quick").sp_start == "prior"
     assert profile_settings("paper").sp_start == "prior"
+    for config in ("slacs.yaml", "paper.yaml"):
+        content = yaml.safe_load((ROOT / "config" / config).read_text())
+        assert settings_from_mapping(content["slam"]).sp_start == "search", config
     with pytest.raises(ValueError, match=r"slam\.sp_start"):
         settings_from_mapping({"sp_start": "grid"})
 

@@ -124,10 +124,11 @@ class SlamSettings:
     prior_passing : {"paper", "2024"}
         Prior-passing rule (SPEC §8.2).
     sp_start : {"prior", "search"}
-        SP's priors: the anchor's (``prior``, SPEC §3, §8.1; the paper profile), or SLaM's
+        SP's priors: the anchor's (``prior``, SPEC §3, §8.1; both profiles), or SLaM's
         passed priors around a maximum-a-posteriori point found from the lensed arcs
-        before sampling (``search``, quick; :mod:`mgelens.pipeline.sp_start`), without
-        which SP settled in a degenerate mass on real imaging (docs/slacs.md).
+        before sampling (``search``, :mod:`mgelens.pipeline.sp_start`; set by the real
+        samples' configs ``config/slacs.yaml`` and ``config/paper.yaml``), without which
+        SP settled in a degenerate mass on real imaging (docs/slacs.md).
     positions_penalty : bool
         Require the multiple images of SP's source centre to re-converge in the source
         plane in SPix1 and MASS (SPEC §12.21; off in the paper profile, on in quick, where
@@ -339,7 +340,6 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
         "quick": SlamSettings(
             profile="quick",
             positions_penalty=True,
-            sp_start="search",
             edge_rule="continuous",
             force_edge_pixels_to_zero=False,
             adaptive_signals="weighted",
