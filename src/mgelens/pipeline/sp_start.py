@@ -2,11 +2,10 @@
 neighbourhood becomes SP's prior (``slam.sp_start: search``).
 
 With the anchor priors alone (θ_E U(0, 8″), mass centre N(c, 0.1″), shear U(±0.2)), SP's
-nested sampler can settle in a degenerate mass on real imaging, where the arcs are faint
-against the lens light and the 20-Gaussian source absorbs light residuals wherever the
-mass puts it (a needle of q 0.03 and θ_E 5.3″ on slacs1020+1122, 750 in ln L below the
-true basin; docs/slacs.md). Local optimisers started from round masses fall into the
-same traps. The arcs themselves say where the mass is:
+nested sampler can settle in a degenerate needle mass on real imaging, where the arcs are
+faint against the lens light and the 20-Gaussian source absorbs light residuals wherever
+the mass puts it; local optimisers started from round masses fall into the same traps
+(docs/slacs.md). The arcs themselves say where the mass is:
 
 1. **Lens light.** The lens-light geometry (shared centre within ±0.3″ of its prior
    mean, ell_comps within ±0.6) maximises ln L + ln prior (Powell, :data:`LIGHT_CALLS`
@@ -171,10 +170,9 @@ def _maximise(
     ``x`` (within ``bounds`` if given), and its value.
 
     Rejected points count as :data:`OPTIMISER_FLOOR` (−1e30): the −1e99 of a rejected
-    sample overflows Brent's parabolic steps into NaN. Bounded Powell stops after about
-    one sweep of its directions (on M1's polish: 200 calls, ln P −57,754 where the
-    unbounded search reached −7,602 in 1,500), so the polish leaves the support to the
-    prior (outside it the posterior is the floor).
+    sample overflows Brent's parabolic steps into NaN. scipy's bounded Powell stops after
+    about one sweep of its directions (docs/slacs.md), so the polish passes no bounds and
+    leaves the support to the prior (outside it the posterior is the floor).
     """
     free = list(free)
     best = {"value": -np.inf, "x": x.copy()}
