@@ -546,12 +546,13 @@ def _solve(
     settings: SlamSettings,
     seed: int,
     lens_dir: Path,
+    checksums: dict,
 ) -> PhaseResult:
     """Sample each problem (one per source-mesh realisation, :func:`chain_settings`), pool
     the runs (:func:`~mgelens.search.sampler.pool_runs`) and write the phase's files; the
-    maximum-likelihood fit is that of the run holding the highest-likelihood sample."""
+    maximum-likelihood fit is that of the run holding the highest-likelihood sample.
+    ``checksums`` are those of the problems' input files, recorded in the result."""
     first = problems[0]
-    checksums = input_checksums(first.inputs)
     sampler = sampler_for(settings.samplers[first.name], first.space.n_free)
     seeds = [seed + k for k in range(len(problems))]
     checkpoints = _checkpoint_paths(
@@ -899,15 +900,17 @@ def run_phase(
             first.mask_radius,
             first.space.n_free,
         )
+        checksums = input_checksums(first.inputs)
         if name == "sp" and settings.sp_start == "search":
-            problems = [started_sp(first, folder)]
-        return _solve(problems, folder, settings, seed, lens_dir)
+            problems = [started_sp(first, folder, checksums)]
+        return _solve(problems, folder, settings, seed, lens_dir, checksums)
 
 
-def started_sp(problem: PhaseProblem, folder: Path) -> PhaseProblem:
+def started_sp(problem: PhaseProblem, folder: Path, checksums: dict) -> PhaseProblem:
     """SP's problem with its priors passed from the arcs' start (:mod:`sp_start`), read
-    from ``folder/start.json`` when it was found for the same inputs and settings."""
-    fingerprint = problem_fingerprint(problem, input_checksums(problem.inputs))
+    from ``folder/start.json`` when it was found for the same inputs (``checksums``, of
+    ``problem.inputs``) and settings."""
+    fingerprint = problem_fingerprint(problem, checksums)
     likelihood = PhaseLikelihood(problem.dataset, problem.space, problem.model)
     start = sp_start.read_or_search(
         folder,
