@@ -7,7 +7,11 @@ from sklearn.cluster import KMeans
 from mgelens.grid import pixel_centres, sub_grid
 from mgelens.source.border import border_pixels, border_sub_pixels, relocate_to_border
 from mgelens.source.image_mesh import (
+    SEEDING_POINTS_PER_CELL,
+    _grid_geometry,
     _kmeans_plusplus,
+    _lloyd,
+    _nearest_centres,
     floored_adapt_image,
     kmeans_centres,
     kmeans_weights,
@@ -85,9 +89,53 @@ def test_compiled_kmeans_plusplus_matches_scikit_learn_quality():
     points = np.column_stack([x, y])
     trials = 2 + int(np.log(150))
     uniforms = np.random.default_rng(0).random(1 + 149 * trials)
-    seeds = _kmeans_plusplus(points, weights, 150, trials, uniforms)
+    grid = _grid_geometry(points, len(points), SEEDING_POINTS_PER_CELL)
+    seeds = _kmeans_plusplus(points, weights, 150, trials, uniforms, grid)
     assert len(np.unique(seeds, axis=0)) == 150
     assert all((points == seed).all(axis=1).any() for seed in seeds)
+
+
+@pytest.mark.parametrize("iterations", [1, 2, 5])
+def test_lloyd_iterations_equal_scikit_learns_from_the_same_seeds(iterations):
+    """Away from ties (random points and weights) the compiled Lloyd iterations give
+    scikit-learn's centres to rounding, whatever the spread of the centres (a dense
+    cluster and sparse outskirts exercise the bucket grid's ring search)."""
+    rng = np.random.default_rng(7)
+    points = np.vstack([rng.normal(0.4, 0.3, (2500, 2)), rng.uniform(-3.0, 3.0, (1500, 2))])
+    weights = rng.uniform(0.01, 1.0, len(points)) * (1 + 20 * (np.hypot(*points.T) < 0.8))
+    seeds = points[rng.choice(len(points), 300, replace=False)]
+    ours = _lloyd(points, weights, seeds, iterations, 0.0)
+    kmeans = KMeans(n_clusters=300, init=seeds, n_init=1, max_iter=iterations, tol=0.0)
+    theirs = kmeans.fit(points, sample_weight=weights).cluster_centers_
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-12)
+
+
+def test_nearest_centres_match_brute_force_and_break_ties_to_the_lower_index():
+    x, y = pixel_centres((60, 60), 0.05)
+    points = np.column_stack([x.ravel(), y.ravel()])
+    rng = np.random.default_rng(2)
+    # centres on pixel centres: many points lie at equal distances from two of them
+    centres = points[rng.choice(len(points), 90, replace=False)][::-1].copy()
+    corners = np.vstack([points.min(axis=0), points.max(axis=0), centres])
+    labels, distances = _nearest_centres(points, centres, *_grid_geometry(corners, 90, 2.0))
+    brute = ((points[:, None, :] - centres[None]) ** 2).sum(axis=2)
+    np.testing.assert_array_equal(labels, np.argmin(brute, axis=1))  # argmin: first minimum
+    np.testing.assert_array_equal(distances, brute.min(axis=1))
+    assert (np.sum(brute == brute.min(axis=1)[:, None], axis=1) > 1).sum() > 50
+
+
+def test_an_empty_cluster_takes_the_point_farthest_from_its_centre():
+    """Two centres on the same point: the second cluster gets no point and is moved, as in
+    scikit-learn, onto the point farthest from its centre, which leaves its cluster."""
+    points = np.array([[0.0, 0.0], [0.1, 0.0], [1.0, 0.0], [5.0, 0.0]])
+    weights = np.array([1.0, 1.0, 1.0, 2.0])
+    seeds = np.array([[0.0, 0.0], [0.0, 0.0], [5.0, 0.0]])
+    centres = _lloyd(points, weights, seeds, 1, 0.0)
+    # cluster 0 holds points 0-2; point 2 is the farthest from its centre (1.0)
+    np.testing.assert_allclose(centres, [[0.05, 0.0], [1.0, 0.0], [5.0, 0.0]], atol=1e-15)
+    kmeans = KMeans(n_clusters=3, init=seeds, n_init=1, max_iter=1, tol=0.0)
+    theirs = kmeans.fit(points, sample_weight=weights).cluster_centers_
+    np.testing.assert_allclose(centres, theirs, atol=1e-12)
 
 
 def anchor_border_pixels(mask):
@@ -254,7 +302,8 @@ def test_compiled_kmeans_plusplus_is_the_plain_greedy_algorithm():
     k = 90
     trials = 2 + int(np.log(k))
     uniforms = rng.random(1 + (k - 1) * trials)
+    grid = _grid_geometry(points, len(points), SEEDING_POINTS_PER_CELL)
     np.testing.assert_array_equal(
-        _kmeans_plusplus(points, weights, k, trials, uniforms),
+        _kmeans_plusplus(points, weights, k, trials, uniforms, grid),
         reference_greedy_seeding(points, weights, k, trials, uniforms),
     )

@@ -23,7 +23,7 @@ def _controller() -> ThreadpoolController:
 
 
 def limit_threads(threads: int) -> None:
-    """Use ``threads`` numba threads and OpenMP threads (scikit-learn), and one BLAS thread.
+    """Use ``threads`` numba threads and OpenMP threads, and one BLAS thread.
 
     scipy.fft follows numba's count (:mod:`mgelens.convolve` passes
     ``workers=numba.get_num_threads()``): with all cores as FFT workers, two one-thread

@@ -22,13 +22,11 @@ Every phase's space also lists the parameters it keeps fixed (at an earlier phas
 maximum-likelihood values), so a result file describes its whole model.
 """
 
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import optimize
-from sklearn.exceptions import ConvergenceWarning
 
 from mgelens.fit import LensModel, MGESource, PixelizedSource
 from mgelens.light import MGESet, Sersic, log_spaced_sigmas
@@ -428,19 +426,14 @@ class KMeansSourceModel:
     signals: str = "anchor"
 
     def centres(self, values: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
-        """Image-plane k-means centres for the weight hyper-parameters in ``values``.
-
-        sklearn's warning that fewer distinct clusters than requested were found is
-        silenced: the duplicated centres make the mesh degenerate, which rejects the sample.
-        """
+        """Image-plane k-means centres for the weight hyper-parameters in ``values``
+        (duplicated centres make the mesh degenerate, which rejects the sample)."""
         weights = kmeans_weights(
             self.adapt_image, values["mesh.weight_floor"], values["mesh.weight_power"], self.scheme
         )
         if not (np.all(np.isfinite(weights)) and weights.sum() > 0):
             raise UnphysicalSample("k-means weights are not finite and positive")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            return kmeans_centres(self.pixel_x, self.pixel_y, weights, self.n_pixels, self.seed)
+        return kmeans_centres(self.pixel_x, self.pixel_y, weights, self.n_pixels, self.seed)
 
     def mesh_model(self, values: Mapping[str, float]) -> MeshSourceModel:
         """The k-means mesh of ``values`` with the adaptive split regularization."""
