@@ -302,37 +302,22 @@ _PAPER_SAMPLERS = {
 
 _QUICK = {"method": "dynesty_static", "sample": "rwalk", "dlogz": 1.0}
 _QUICK_SAMPLERS = {
-    "sp": SamplerSettings(n_live=60, **_QUICK),
+    "sp": SamplerSettings(method="nautilus", n_live=50, n_eff=300, f_live=0.05),
     "spix1": SamplerSettings(n_live=24, **_QUICK),
-    "spix2": SamplerSettings(n_live=12, **_QUICK),
+    "spix2": SamplerSettings(n_live=24, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
     "mass": SamplerSettings(method="nautilus", n_live=30, n_eff=300, f_live=0.05),
 }
-"""Quick-profile samplers. SP to LIGHT: dynesty random walks (5 steps) with a loose
-stopping criterion; these phases hand their maximum-likelihood model on. SPix2 and LIGHT
-use about 2 n_dim + 2 live points (dynesty needs more than 2 n_dim), SPix1 3 n_dim (24):
-with 18, M2's SPix1 stopped in false modes, ln Z 6,962 (sampler seed 1: mass q 0.82,
-truth 0.77, and MASS then missed five of eight values) and 7,522 (seed 0) where 24 live
-points reached 7,742 (q 0.771) in a similar 5,900 calls and 30 reached 7,747. SP, whose
-17-parameter parametric fit is the most multimodal, uses 60: with 36, M1's SP stopped in a
-false mode (mass q 0.65, shear 0.07, centre 0.07″ off; max ln L −39,655 after 62,183
-calls), where 60 reached q 0.80, shear 0.006 and the true centre to 0.004″ (max ln L
-−7,019 after 27,800 calls; −7,428 with another seed). Shorter walks (3 steps) also made
-SP converge to a far worse maximum. MASS, whose posterior is the result: nautilus with 30
-live points per source mesh (two meshes), stopped at 300 effective samples each. On M3
-30 live points took 2,900 calls per mesh against 4,800–5,100 with 50, for the same
-posterior (θ_E 1.0964 (1.0932, 1.1000) against 1.0966 (1.0936, 1.0996) on one mesh,
-1.1045 (1.1015, 1.1084) against 1.1044 (1.1010, 1.1084) on the other). With 50 live
-points on one mesh, M1 and M2 took 5,400–5,900 calls and left 620–730 effective
-samples, where dynesty with 20 live points took 4,100–4,800 calls and left 61–68, too
-few for a 99.73 % interval (its 3σ intervals came out 1.6–1.8 times narrower); its
-intervals matched nautilus with the paper's 150 live points (13,000 calls). Its
-exploration stops when the live set holds 5 % of the evidence (anchor 1 %): on M2 that
-took 8,500 calls instead of 9,300 with the same posterior (γ 1.9189 against 1.9186,
-the same 3σ limits to 1e−4); one network instead of four took 10,500 calls. In the
-quick profile the four networks take 21–22 s of a mesh's ~130 s on M2 and M3; two
-trained in 9–10 s but needed 2,700 and 3,400 calls instead of 2,600 and 2,800 (same
-posteriors), so four stay."""
+"""Quick-profile samplers. SP and MASS: nautilus, stopped when the live set holds 5 % of
+the evidence and 300 effective samples are drawn. SP, the most multimodal phase (17
+parameters), uses 50 live points; MASS, whose posterior is the result, 30 per source mesh
+(two meshes). SPix1 to LIGHT: dynesty random walks (5 steps) with a loose stopping
+criterion; these phases hand their maximum-likelihood model on. LIGHT uses about 2 n_dim
++ 2 live points (dynesty needs more than 2 n_dim), SPix1 3 n_dim (24), SPix2 24 for its 5
+parameters, because with 12 its walks collapsed onto spikes of ln ε over the k-means
+weights and stopped on a likelihood plateau. The measurements behind each choice (false
+modes with fewer live points, calls and posteriors against other settings) are in
+docs/slam.md, "Quick-profile samplers"."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
     {
