@@ -302,22 +302,21 @@ _PAPER_SAMPLERS = {
 
 _QUICK = {"method": "dynesty_static", "sample": "rwalk", "dlogz": 1.0}
 _QUICK_SAMPLERS = {
-    "sp": SamplerSettings(method="nautilus", n_live=50, n_eff=300, f_live=0.05),
+    "sp": SamplerSettings(n_live=60, **_QUICK),
     "spix1": SamplerSettings(n_live=24, **_QUICK),
     "spix2": SamplerSettings(n_live=24, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
     "mass": SamplerSettings(method="nautilus", n_live=30, n_eff=300, f_live=0.05),
 }
-"""Quick-profile samplers. SP and MASS: nautilus, stopped when the live set holds 5 % of
-the evidence and 300 effective samples are drawn. SP, the most multimodal phase (17
-parameters), uses 50 live points; MASS, whose posterior is the result, 30 per source mesh
-(two meshes). SPix1 to LIGHT: dynesty random walks (5 steps) with a loose stopping
-criterion; these phases hand their maximum-likelihood model on. LIGHT uses about 2 n_dim
-+ 2 live points (dynesty needs more than 2 n_dim), SPix1 3 n_dim (24), SPix2 24 for its 5
-parameters, because with 12 its walks collapsed onto spikes of ln ε over the k-means
-weights and stopped on a likelihood plateau. The measurements behind each choice (false
-modes with fewer live points, calls and posteriors against other settings) are in
-docs/slam.md, "Quick-profile samplers"."""
+"""Quick-profile samplers. SP to LIGHT: dynesty random walks (5 steps) with a loose
+stopping criterion; these phases hand their maximum-likelihood model on. SP, the most
+multimodal phase (17 parameters), uses 60 live points, SPix1 3 n_dim (24), SPix2 24 for
+its 5 parameters (with 12 its walks collapsed onto spikes of ln ε over the k-means
+weights and stopped on a likelihood plateau), LIGHT about 2 n_dim + 2 (dynesty needs
+more than 2 n_dim). MASS, whose posterior is the result: nautilus with 30 live points per
+source mesh (two meshes), stopped when the live set holds 5 % of the evidence and 300
+effective samples are drawn. The measurements behind each choice, and nautilus tried
+for SP, are in docs/slam.md, "Quick-profile samplers"."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
     {
