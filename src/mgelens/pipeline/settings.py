@@ -304,19 +304,20 @@ _QUICK = {"method": "dynesty_static", "sample": "rwalk", "dlogz": 1.0}
 _QUICK_SAMPLERS = {
     "sp": SamplerSettings(n_live=60, **_QUICK),
     "spix1": SamplerSettings(n_live=24, **_QUICK),
-    "spix2": SamplerSettings(n_live=24, **_QUICK),
+    "spix2": SamplerSettings(n_live=12, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
     "mass": SamplerSettings(method="nautilus", n_live=30, n_eff=300, f_live=0.05),
 }
 """Quick-profile samplers. SP to LIGHT: dynesty random walks (5 steps) with a loose
 stopping criterion; these phases hand their maximum-likelihood model on. SP, the most
-multimodal phase (17 parameters), uses 60 live points, SPix1 3 n_dim (24), SPix2 24 for
-its 5 parameters (with 12 its walks collapsed onto spikes of ln ε over the k-means
-weights and stopped on a likelihood plateau), LIGHT about 2 n_dim + 2 (dynesty needs
-more than 2 n_dim). MASS, whose posterior is the result: nautilus with 30 live points per
-source mesh (two meshes), stopped when the live set holds 5 % of the evidence and 300
-effective samples are drawn. The measurements behind each choice, and nautilus tried
-for SP, are in docs/slam.md, "Quick-profile samplers"."""
+multimodal phase (17 parameters), uses 60 live points, SPix1 3 n_dim (24), SPix2 and
+LIGHT about 2 n_dim + 2 (dynesty needs more than 2 n_dim). ln ε has spikes over SPix2's
+k-means weights on which its walks can collapse and stop short of convergence; the real
+samples' configs (config/slacs.yaml, config/paper.yaml) give SPix2 24 live points, with
+which that happened less often. MASS, whose posterior is the result: nautilus with 30
+live points per source mesh (two meshes), stopped when the live set holds 5 % of the
+evidence and 300 effective samples are drawn. The measurements behind each choice, and
+nautilus tried for SP, are in docs/slam.md, "Quick-profile samplers"."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
     {
