@@ -483,7 +483,7 @@ def mock_dir(tmp_path_factory):
 
 
 def tiny_settings(**sampler):
-    sp = {"method": "dynesty_static", "n_live": 36, "dlogz": 0.5, "progress_every": 1e9, **sampler}
+    sp = {"n_live": 36, "dlogz": 0.5, "progress_every": 1e9, **sampler}
     return settings_from_mapping(
         {"mask_radius": MASK_RADIUS, "lp_sub_size_centre": 4, "samplers": {"sp": sp}}
     )
@@ -626,8 +626,7 @@ def test_interrupted_phase_resumes_to_the_uninterrupted_result(sp_run, mock_dir,
         f"  mask_radius: {MASK_RADIUS}\n"
         "  lp_sub_size_centre: 4\n"
         "  samplers:\n"
-        "    sp: {method: dynesty_static, n_live: 36, dlogz: 0.5, progress_every: 1000000000,"
-        " checkpoint_every: 0.2}\n"
+        "    sp: {n_live: 36, dlogz: 0.5, progress_every: 1000000000, checkpoint_every: 0.2}\n"
     )
     results = tmp_path / "results"
     command = [sys.executable, "-m", "mgelens", "phase", "sp", "--lens-dir", str(mock_dir)]
@@ -647,14 +646,7 @@ def test_interrupted_phase_resumes_to_the_uninterrupted_result(sp_run, mock_dir,
         {
             "mask_radius": MASK_RADIUS,
             "lp_sub_size_centre": 4,
-            "samplers": {
-                "sp": {
-                    "method": "dynesty_static",
-                    "n_live": 36,
-                    "dlogz": 0.5,
-                    "progress_every": 1e9,
-                }
-            },
+            "samplers": {"sp": {"n_live": 36, "dlogz": 0.5, "progress_every": 1e9}},
         }
     )
     resumed = phases.run_phase("sp", mock_dir, results, settings, seed=3, threads=1)

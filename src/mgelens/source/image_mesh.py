@@ -82,6 +82,17 @@ def kmeans_weights(
     raise ValueError(f"unknown k-means weight scheme {scheme!r}; use '2023' or '2024'")
 
 
+SEEDING_POINTS_PER_CELL = 8.0
+"""Points per cell of the seeding's bucket grid."""
+
+LLOYD_CENTRES_PER_CELL = 2.0
+"""Centres per cell of the Lloyd iterations' bucket grid."""
+
+KMEANS_TOLERANCE = 1e-4
+"""Lloyd stops once the centres' total squared shift is at most this fraction of the mean
+variance of the point coordinates (scikit-learn's ``tol`` default and definition)."""
+
+
 def kmeans_centres(
     x: np.ndarray,
     y: np.ndarray,
@@ -125,17 +136,6 @@ def kmeans_centres(
     tolerance = KMEANS_TOLERANCE * float(np.mean(np.var(points, axis=0)))
     centres = _lloyd(points, weights, initial, max_iter, tolerance)
     return centres[:, 0].copy(), centres[:, 1].copy()
-
-
-SEEDING_POINTS_PER_CELL = 8.0
-"""Points per cell of the seeding's bucket grid."""
-
-LLOYD_CENTRES_PER_CELL = 2.0
-"""Centres per cell of the Lloyd iterations' bucket grid."""
-
-KMEANS_TOLERANCE = 1e-4
-"""Lloyd stops once the centres' total squared shift is at most this fraction of the mean
-variance of the point coordinates (scikit-learn's ``tol`` default and definition)."""
 
 
 @njit
@@ -313,8 +313,8 @@ def _nearest_centres(points, centres, x0, y0, cell, nx, ny):
         for r in range(rings + 1):
             for j in range(max(cj - r, 0), min(cj + r, ny - 1) + 1):
                 edge_row = j == cj - r or j == cj + r
-                step = 1 if edge_row else 2 * r
-                for i in range(ci - r, ci + r + 1, max(step, 1)):
+                step = 1 if edge_row else 2 * r  # inner rows: only the ring's two ends
+                for i in range(ci - r, ci + r + 1, step):
                     if i < 0 or i >= nx:
                         continue
                     c = j * nx + i
@@ -336,7 +336,7 @@ def _weighted_means(points, weights, labels, distances, centres):
     clusters of zero weight (see :func:`_lloyd`). A cluster whose weight is still zero
     stays where it was, or on the point it was relocated to."""
     k = centres.shape[0]
-    fallback = centres.copy()
+    means = centres.copy()
     sums = np.zeros((k, 2))
     totals = np.zeros(k)
     for p in range(points.shape[0]):
@@ -355,8 +355,7 @@ def _weighted_means(points, weights, labels, distances, centres):
             sums[new, 0] = weights[p] * points[p, 0]
             sums[new, 1] = weights[p] * points[p, 1]
             totals[new] = weights[p]
-            fallback[new] = points[p]
-    means = fallback
+            means[new] = points[p]
     for c in range(k):
         if totals[c] > 0.0:
             means[c, 0], means[c, 1] = sums[c, 0] / totals[c], sums[c, 1] / totals[c]
