@@ -1,5 +1,6 @@
 """Nested sampling: evidence and posterior of a known Gaussian, rejections, resume, backends."""
 
+import dataclasses
 import json
 import math
 import platform
@@ -382,6 +383,97 @@ def test_sample_method_resolution():
     assert resolve_sample_method("slice", 3) == "slice"
 
 
+class PlateauFirst(GaussianLikelihood):
+    """ln L = −3 for the first ``n_flat`` calls (a run whose first live points come from
+    them stops on that plateau before its first dead point), the Gaussian after."""
+
+    def __init__(self, n_flat, **options):
+        super().__init__(**options)
+        self.n_flat = n_flat
+
+    def __call__(self, x: np.ndarray) -> float:
+        value = super().__call__(x)
+        return -3.0 if self.calls <= self.n_flat else value
+
+
+PLATEAU = SamplerSettings(n_live=10, sample="rwalk", dlogz=0.5, progress_every=1e9)
+
+
+def test_a_run_that_stops_on_a_plateau_restarts_with_twice_the_live_points():
+    settings = dataclasses.replace(PLATEAU, plateau_restarts=2)
+    lines: list[str] = []
+    output = run_nested(PlateauFirst(n_flat=10), SPACE, settings, seed=3, log=lines.append)
+    assert any("restart 1 of 2 after a likelihood plateau, with 20 live points" in x for x in lines)
+    # the restart is a fresh run of 20 live points with the next seed on the Gaussian
+    fresh = run_nested(
+        GaussianLikelihood(),
+        SPACE,
+        dataclasses.replace(PLATEAU, n_live=20),
+        seed=4,
+        log=lambda _: None,
+    )
+    np.testing.assert_array_equal(output.samples, fresh.samples)
+    assert output.log_evidence == fresh.log_evidence
+    assert (output.settings["n_live"], output.seed) == (20, 4)
+    assert output.converged
+    assert output.n_calls == fresh.n_calls + 10
+    assert "attempt 2 of 3, live points 10, 20" in output.stop_reason
+    assert_recovers_gaussian(output)
+
+    # without restarts the plateau is reported, not hidden
+    alone = run_nested(PlateauFirst(n_flat=10), SPACE, PLATEAU, seed=3, log=lambda _: None)
+    assert not alone.converged
+    assert alone.stop_reason.startswith("stopped on a likelihood plateau")
+    assert "Δln Z = inf" in alone.stop_reason  # stopped before its first dead point
+
+    # a run that converges is not restarted
+    plain = run_nested(GaussianLikelihood(), SPACE, PLATEAU, seed=3, log=lambda _: None)
+    again = run_nested(GaussianLikelihood(), SPACE, settings, seed=3, log=lambda _: None)
+    assert plain.converged
+    assert again.n_calls == plain.n_calls
+    np.testing.assert_array_equal(again.samples, plain.samples)
+
+
+def test_restarts_that_all_stop_on_the_plateau_leave_the_run_unconverged():
+    settings = dataclasses.replace(PLATEAU, plateau_restarts=2)
+    output = run_nested(PlateauFirst(n_flat=10**9), SPACE, settings, seed=3, log=lambda _: None)
+    assert not output.converged
+    assert output.stop_reason.startswith("stopped on a likelihood plateau")
+    assert "attempt 3 of 3, live points 10, 20, 40" in output.stop_reason
+    assert output.n_calls == 10 + 20 + 40
+    assert output.settings["n_live"] == 40
+
+
+def test_an_interrupted_restart_resumes_from_its_own_checkpoint(tmp_path):
+    checkpoint = tmp_path / "sampler.pickle"
+    settings = dataclasses.replace(PLATEAU, plateau_restarts=1, checkpoint_every=0.0)
+    reference = run_nested(PlateauFirst(n_flat=10), SPACE, settings, seed=3, log=lambda _: None)
+    restart_checkpoint = tmp_path / "sampler-restart1.pickle"
+    with pytest.raises(Interrupted):  # half-way through the restart
+        run_nested(
+            PlateauFirst(
+                n_flat=10,
+                stop_after=10 + reference.n_calls // 2,
+                stop_once_exists=restart_checkpoint,
+            ),
+            SPACE,
+            settings,
+            checkpoint,
+            seed=3,
+            log=lambda _: None,
+        )
+    assert (tmp_path / "sampler-restart1.fingerprint.json").exists()
+    lines: list[str] = []
+    # the first attempt's finished checkpoint is not sampled again: every call is the
+    # restart's, on the Gaussian
+    resumed = run_nested(PlateauFirst(n_flat=0), SPACE, settings, checkpoint, 3, lines.append)
+    assert sum("resuming" in line for line in lines) == 2
+    np.testing.assert_array_equal(resumed.samples, reference.samples)
+    assert resumed.log_evidence == reference.log_evidence
+    assert resumed.n_calls == reference.n_calls
+    assert resumed.n_resumes == 1
+
+
 def test_settings_validation():
     with pytest.raises(ValueError, match="method"):
         SamplerSettings(method="multinest")
@@ -389,6 +481,10 @@ def test_settings_validation():
         SamplerSettings.from_dict({"nlive": 100})
     assert SamplerSettings.from_dict(FAST.to_dict()) == FAST
     assert "n_processes" not in FAST.result_settings()
+    with pytest.raises(ValueError, match="plateau_restarts applies to method dynesty_static"):
+        SamplerSettings(method="nautilus", plateau_restarts=1)
+    with pytest.raises(ValueError, match="plateau_restarts"):
+        SamplerSettings(plateau_restarts=-1)
 
 
 def test_nan_likelihood_is_an_error():

@@ -304,7 +304,7 @@ _QUICK = {"method": "dynesty_static", "sample": "rwalk", "dlogz": 1.0}
 _QUICK_SAMPLERS = {
     "sp": SamplerSettings(n_live=60, **_QUICK),
     "spix1": SamplerSettings(n_live=24, **_QUICK),
-    "spix2": SamplerSettings(n_live=12, **_QUICK),
+    "spix2": SamplerSettings(n_live=12, plateau_restarts=2, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
     "mass": SamplerSettings(method="nautilus", n_live=30, n_eff=300, f_live=0.05),
 }
@@ -312,11 +312,12 @@ _QUICK_SAMPLERS = {
 stopping criterion; these phases hand their maximum-likelihood model on. SP, the most
 multimodal phase (17 parameters), uses 60 live points, SPix1 3 n_dim (24), SPix2 and
 LIGHT about 2 n_dim + 2 (dynesty needs more than 2 n_dim). ln ε has spikes over SPix2's
-k-means weights on which its walks can collapse and stop short of convergence; the real
-samples' configs (config/slacs.yaml, config/paper.yaml) give SPix2 24 live points, with
-which that happened less often. MASS, whose posterior is the result: nautilus with 30
-live points per source mesh (two meshes), stopped when the live set holds 5 % of the
-evidence and 300 effective samples are drawn. The measurements behind each choice, and
+k-means weights on which its walks can collapse, every live point a copy of one, and stop
+short of convergence: SPix2 then starts afresh with twice the live points, up to twice
+(12, 24, 48); the real samples' configs (config/slacs.yaml, config/paper.yaml) start it
+at 24. MASS, whose posterior is the result: nautilus with 30 live points per source mesh
+(two meshes), stopped when the live set holds 5 % of the evidence and 300 effective
+samples are drawn. The measurements behind each choice, and
 nautilus tried for SP, are in docs/slam.md, "Quick-profile samplers"."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(

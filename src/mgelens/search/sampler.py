@@ -45,7 +45,7 @@ import multiprocessing
 import time
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import dynesty
@@ -115,6 +115,15 @@ discard_exploration
         Likelihood processes; 1 = no pool.
     queue_size : int or None
         dynesty proposals evaluated in parallel (default: ``n_processes``).
+    plateau_restarts : int
+        Static dynesty only: how many times a run that stops on a likelihood plateau (every
+        live point at one ln L, short of ``dlogz`` and of the caps) is started afresh with
+        twice the live points and the next seed. Random walks that cannot leave a narrow
+        spike of ln L return copies of it until every live point is that copy; more live
+        points make that rarer. Each attempt has its own checkpoint (``<stem>-restart<k>``)
+        and its own caps; the output is the last attempt's (samples, settings, seed), with
+        the calls, runtimes and resumes of all attempts summed and the restarts named in
+        its stop reason.
 
     The fields from ``checkpoint_every`` on change only how a run is executed, not its
     result, except that a pool (``n_processes > 1``) changes both samplers' random
@@ -146,6 +155,7 @@ discard_exploration
     progress_every: float = 60.0
     n_processes: int = 1
     queue_size: int | None = None
+    plateau_restarts: int = 0
 
     def __post_init__(self):
         """Check every field's type and range; a ValueError starts with the field's name."""
@@ -163,6 +173,11 @@ discard_exploration
         values.boolean("discard_exploration", self.discard_exploration)
         if self.max_iterations is not None and self.method == "nautilus":
             raise ValueError("max_iterations applies to the dynesty samplers only")
+        if self.plateau_restarts and self.method != "dynesty_static":
+            raise ValueError(
+                "plateau_restarts applies to method dynesty_static only (the others do not "
+                f"stop on a likelihood plateau), not to {self.method}"
+            )
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -199,6 +214,7 @@ _INTEGER_FIELDS = {
     "n_shell": 1,
     "n_processes": 1,
     "queue_size": 1,
+    "plateau_restarts": 0,
 }
 """Integer settings and their minimum."""
 _NUMBER_FIELDS = {
@@ -645,15 +661,29 @@ def _new_dynesty_sampler(settings: SamplerSettings, n_dim: int, seed: int, pool)
         if settings.method == "dynesty_dynamic"
         else dynesty.NestedSampler
     )
-    return factory(
-        _log_likelihood, _prior_transform, n_dim, rstate=np.random.default_rng(seed), **options
-    )
+    with _plateau_warnings_logged_by_mgelens():
+        return factory(
+            _log_likelihood, _prior_transform, n_dim, rstate=np.random.default_rng(seed), **options
+        )
+
+
+@contextlib.contextmanager
+def _plateau_warnings_logged_by_mgelens() -> Iterator[None]:
+    """Silence dynesty's warnings about caps and likelihood plateaus: a run that stops on
+    either is logged and recorded by mgelens (its stop reason, ``converged: false``)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "The sampling was stopped short", UserWarning)
+        warnings.filterwarnings("ignore", "We have reached the plateau", UserWarning)
+        warnings.filterwarnings("ignore", "All the initial likelihood values", RuntimeWarning)
+        yield
 
 
 def _run_dynesty(
     sampler, settings: SamplerSettings, progress, checkpoint: str | None, resume, calls_so_far
 ) -> tuple[bool, str]:
-    """Run (or continue) a dynesty sampler; return (converged, stop reason)."""
+    """Run (or continue) a dynesty sampler; return (converged, stop reason). A static run
+    that stopped short of ``dlogz`` without reaching a cap stopped on a likelihood plateau,
+    and its reason starts with :data:`PLATEAU_STOP`."""
     maxcall = None if settings.max_calls is None else max(settings.max_calls - calls_so_far, 1)
     common = {
         "print_progress": True,
@@ -665,8 +695,7 @@ def _run_dynesty(
         "maxcall": maxcall,
     }
     iterations_before, calls_before = sampler.it, sampler.ncall
-    with warnings.catch_warnings():  # mgelens logs its own warning for the caps
-        warnings.filterwarnings("ignore", "The sampling was stopped short", UserWarning)
+    with _plateau_warnings_logged_by_mgelens():
         _run_dynesty_quietly(sampler, settings, common)
     cap = _reached_cap(
         settings, maxcall, sampler.it - iterations_before, sampler.ncall - calls_before
@@ -678,8 +707,13 @@ def _run_dynesty(
     delta, dlogz = final_delta_log_evidence(sampler), _static_dlogz(settings)
     if delta < dlogz:
         return True, f"remaining Δln Z = {delta:.4g} below dlogz = {dlogz:.4g}"
-    stop = f"stopped at {cap}" if cap else "stopped on a likelihood plateau"
+    stop = f"stopped at {cap}" if cap else PLATEAU_STOP
     return False, f"{stop} with remaining Δln Z = {delta:.4g} above dlogz = {dlogz:.4g}"
+
+
+PLATEAU_STOP = "stopped on a likelihood plateau"
+"""Start of the stop reason of a static dynesty run whose live points all reached one ln L
+before its remaining Δln Z fell below ``dlogz``."""
 
 
 def _reached_cap(settings: SamplerSettings, maxcall: int | None, iterations, calls) -> str:
@@ -703,9 +737,12 @@ def final_delta_log_evidence(sampler) -> float:
     """Remaining Δln Z = ln(Z + L_max X) − ln Z of a finished static dynesty run, where
     it stopped: the value dynesty compared with ``dlogz`` (Z and the prior volume X at the
     last dead point, L_max the best final live point; the final live points are the last
-    ``nlive`` entries of the run)."""
+    ``nlive`` entries of the run). A run that stopped before its first dead point (its
+    first live points all at one ln L) has integrated nothing: Δln Z is infinite."""
     run = sampler.saved_run
     last = len(run["logl"]) - sampler.nlive - 1
+    if last < 0:
+        return math.inf
     live_max = float(np.max(run["logl"][last + 1 :]))
     return float(np.logaddexp(0.0, live_max + run["logvol"][last] - run["logz"][last]))
 
@@ -974,4 +1011,46 @@ def run_nested(
     evaluation = _Evaluation(log_likelihood, space, SPAWN.Array("q", 2))
     if settings.method == "nautilus":
         return _sample_nautilus(evaluation, settings, checkpoint, seed, log)
-    return _sample_dynesty(evaluation, settings, checkpoint, seed, log)
+    output = _sample_dynesty(evaluation, settings, checkpoint, seed, log)
+    attempts = [output]
+    for attempt in range(1, settings.plateau_restarts + 1):
+        if not output.stop_reason.startswith(PLATEAU_STOP):
+            break
+        restart = replace(settings, n_live=settings.n_live * 2**attempt, plateau_restarts=0)
+        log(
+            f"{settings.method}: restart {attempt} of {settings.plateau_restarts} after a "
+            f"likelihood plateau, with {restart.n_live} live points and seed {seed + attempt}"
+        )
+        evaluation.counts[:] = [0, 0]
+        output = _sample_dynesty(
+            evaluation, restart, _restart_checkpoint(checkpoint, attempt), seed + attempt, log
+        )
+        attempts.append(output)
+    return _with_restarts(attempts, settings.plateau_restarts)
+
+
+def _restart_checkpoint(checkpoint: Path | None, attempt: int) -> Path | None:
+    """Checkpoint of restart ``attempt`` (``<stem>-restart<attempt><suffix>``)."""
+    if checkpoint is None:
+        return None
+    return checkpoint.with_name(f"{checkpoint.stem}-restart{attempt}{checkpoint.suffix}")
+
+
+def _with_restarts(attempts: list[SamplerOutput], plateau_restarts: int) -> SamplerOutput:
+    """The last attempt's output with the calls, rejections, runtimes and resumes of every
+    attempt summed, and the restarts named in its stop reason."""
+    last = attempts[-1]
+    if len(attempts) == 1:
+        return last
+    live = ", ".join(str(a.settings["n_live"]) for a in attempts)
+    return replace(
+        last,
+        n_calls=sum(a.n_calls for a in attempts),
+        n_rejected=sum(a.n_rejected for a in attempts),
+        runtime=sum(a.runtime for a in attempts),
+        n_resumes=sum(a.n_resumes for a in attempts),
+        stop_reason=(
+            f"{last.stop_reason} (attempt {len(attempts)} of {plateau_restarts + 1}, live "
+            f"points {live}: the earlier attempts {PLATEAU_STOP})"
+        ),
+    )
