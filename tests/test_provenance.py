@@ -1,9 +1,20 @@
 """The code version that keys workflow reruns and checkpoints."""
 
+import re
 import shutil
+from pathlib import Path
+
+import pytest
 
 from mgelens import __version__
-from mgelens.provenance import PACKAGE_ROOT, code_version, source_digest
+from mgelens.provenance import (
+    PACKAGE_ROOT,
+    code_version,
+    command_digest,
+    command_version,
+    module_closure,
+    source_digest,
+)
 
 
 def test_code_version_is_the_version_and_the_digest_of_the_installed_source():
@@ -24,3 +35,74 @@ def test_source_digest_follows_python_files_only(tmp_path):
     assert edited != before
     module.rename(package / "renamed.py")
     assert source_digest(package) not in (before, edited)
+
+
+def test_a_command_is_keyed_on_the_modules_it_imports_and_no_others():
+    phase = {
+        p.relative_to(PACKAGE_ROOT).as_posix() for p in module_closure("mgelens.commands.phase")
+    }
+    for fitting in ("fit.py", "pipeline/phases.py", "search/sampler.py", "inversion/solve.py"):
+        assert fitting in phase
+    assert not any(name.startswith("plot/") for name in phase)
+    summary = {
+        p.relative_to(PACKAGE_ROOT).as_posix() for p in module_closure("mgelens.commands.summary")
+    }
+    assert "plot/summary.py" in summary
+    assert command_version("phase") == f"{__version__}+{command_digest('phase')}"
+    with pytest.raises(ValueError, match="no command 'fly'"):
+        command_digest("fly")
+
+
+def test_editing_a_plotting_module_changes_the_figures_version_and_not_the_fits(tmp_path):
+    root = tmp_path / "mgelens"
+    shutil.copytree(PACKAGE_ROOT, root, ignore=shutil.ignore_patterns("__pycache__"))
+    before = {command: command_digest(command, root) for command in ("phase", "summary")}
+
+    def edit(relative):
+        path = root / relative
+        path.write_text(path.read_text() + "\n# an edit\n")
+        return {command: command_digest(command, root) for command in ("phase", "summary")}
+
+    after_plot = edit("plot/summary.py")
+    assert after_plot["phase"] == before["phase"]
+    assert after_plot["summary"] != before["summary"]
+    after_fit = edit("fit.py")
+    assert after_fit["phase"] != after_plot["phase"]
+
+
+def test_module_closure_follows_relative_and_function_level_imports(tmp_path):
+    root = tmp_path / "mgelens"
+    (root / "sub").mkdir(parents=True)
+    files = {
+        "__init__.py": "",
+        "sub/__init__.py": "from . import helper\n",
+        "sub/helper.py": "X = 1\n",
+        "sub/entry.py": "def run():\n    from ..lazy import thing\n    return thing\n",
+        "lazy.py": "from mgelens.sub.helper import X as thing\n",
+        "unused.py": "",
+    }
+    for relative, text in files.items():
+        (root / relative).write_text(text)
+    closure = module_closure("mgelens.sub.entry", root)
+    assert [p.relative_to(root).as_posix() for p in closure] == [
+        "__init__.py",
+        "lazy.py",
+        "sub/__init__.py",
+        "sub/entry.py",
+        "sub/helper.py",
+    ]
+
+
+def test_every_workflow_rule_is_keyed_on_the_command_it_runs():
+    rules = Path(__file__).resolve().parents[1] / "workflow" / "rules"
+    keyed = 0
+    for smk in rules.glob("*.smk"):
+        text = smk.read_text()
+        assert "code_version" not in text, smk
+        for block in re.split(r"\n(?=rule |use rule )", text):
+            versions = re.findall(r'mgelens_version=command_version\("(\w+)"\)', block)
+            commands = re.findall(r'"mgelens (\w+) ', block)
+            if versions:
+                keyed += 1
+                assert versions == commands[:1], (smk.name, block[:60])
+    assert keyed >= 10

@@ -1,11 +1,16 @@
 """What code produced a result: the package version and a digest of its source.
 
 The version number changes only when it is bumped; the digest changes with any edit to
-the package's Python files. Workflow rules (``params: mgelens_version``) and sampler
-checkpoints are keyed on :func:`code_version`, so a changed library reruns the fits and
-never resumes a checkpoint written by other code.
+the package's Python files. :func:`code_version` digests the whole package and is stored
+in result files as provenance. :func:`command_version` digests only the files that one
+``mgelens <command>`` runs (the command's module and every mgelens module it imports,
+found statically): each workflow rule is keyed on its command's version (``params:
+mgelens_version``) and each phase's checkpoint on the ``phase`` command's, so editing a
+plotting module reruns the figures and not the fits, and a fit never resumes a
+checkpoint written by other fitting code.
 """
 
+import ast
 import functools
 import hashlib
 from pathlib import Path
@@ -15,14 +20,101 @@ from mgelens import __version__
 PACKAGE_ROOT = Path(__file__).resolve().parent
 
 
-def source_digest(root: Path) -> str:
-    """First 12 hex digits of the SHA-256 of the ``*.py`` files under ``root`` (each file's
-    path relative to ``root`` and its bytes, in sorted path order)."""
+def source_digest(root: Path, files: list[Path] | None = None) -> str:
+    """First 12 hex digits of the SHA-256 of ``files`` (default: every ``*.py`` file under
+    ``root``): each file's path relative to ``root`` and its bytes, in sorted path order."""
     digest = hashlib.sha256()
-    for path in sorted(Path(root).rglob("*.py")):
-        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
-        digest.update(path.read_bytes())
+    for path in sorted(Path(root).rglob("*.py") if files is None else files):
+        digest.update(Path(path).relative_to(root).as_posix().encode() + b"\0")
+        digest.update(Path(path).read_bytes())
     return digest.hexdigest()[:12]
+
+
+def _module_file(root: Path, package: str, name: str) -> Path | None:
+    """The file of module ``name`` (dotted, starting with ``package``) under ``root``,
+    the package's folder: ``a/b.py`` or ``a/b/__init__.py``; ``None`` if neither exists."""
+    parts = name.split(".")[1:]
+    base = root.joinpath(*parts)
+    for candidate in (base.with_suffix(".py") if parts else None, base / "__init__.py"):
+        if candidate is not None and candidate.is_file():
+            return candidate
+    return None
+
+
+def _imported_names(path: Path, module: str, package: str) -> set[str]:
+    """Dotted names of the ``package`` modules that the file ``path`` (module ``module``)
+    may import: every import statement in it, at any depth (imports inside functions
+    count), with ``from x import y`` giving both ``x`` and ``x.y``, relative imports
+    resolved, and every parent package of each name (importing ``a.b.c`` runs
+    ``a/__init__.py`` and ``a/b/__init__.py``)."""
+    is_package = path.name == "__init__.py"
+    here = module if is_package else module.rpartition(".")[0]
+    names = set()
+    for node in ast.walk(ast.parse(path.read_bytes(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                anchor = here.rsplit(".", node.level - 1)[0] if node.level > 1 else here
+                base = f"{anchor}.{node.module}" if node.module else anchor
+            else:
+                base = node.module or ""
+            names.add(base)
+            names.update(f"{base}.{alias.name}" for alias in node.names)
+    found = set()
+    for name in names:
+        if name == package or name.startswith(package + "."):
+            parts = name.split(".")
+            found.update(".".join(parts[: k + 1]) for k in range(len(parts)))
+    return found
+
+
+def module_closure(module: str, root: Path | None = None, package: str = "mgelens") -> list[Path]:
+    """The files that importing ``module`` can run: its own and those of every module of
+    ``package`` (rooted at ``root``, default the installed package) it imports, directly or
+    through others, sorted. Static and conservative: an import anywhere in a file counts."""
+    root = PACKAGE_ROOT if root is None else Path(root)
+    files: set[Path] = set()
+    pending = [module]
+    seen: set[str] = set()
+    while pending:
+        name = pending.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        path = _module_file(root, package, name)
+        if path is None:  # a name imported from a module, not a module
+            continue
+        files.add(path)
+        pending.extend(_imported_names(path, name, package) - seen)
+    return sorted(files)
+
+
+COMMAND_ENTRY = ("mgelens.cli", "mgelens.commands")
+"""Modules that run before any command: the console script's parser and the commands'
+package."""
+
+
+def command_digest(command: str, root: Path | None = None) -> str:
+    """:func:`source_digest` of the files that ``mgelens <command>`` runs: the command's
+    module, :data:`COMMAND_ENTRY` and every mgelens module they import
+    (:func:`module_closure`), in the package at ``root`` (default: the installed one).
+    Raises ValueError for an unknown command."""
+    root = PACKAGE_ROOT if root is None else Path(root)
+    module = f"mgelens.commands.{command}"
+    if _module_file(root, "mgelens", module) is None:
+        raise ValueError(f"no command {command!r}: no module {module}")
+    files = set()
+    for name in (module, *COMMAND_ENTRY):
+        files.update(module_closure(name, root))
+    return source_digest(root, sorted(files))
+
+
+@functools.cache
+def command_version(command: str) -> str:
+    """``<version>+<digest>`` of ``mgelens <command>`` (:func:`command_digest`; computed
+    once per process), e.g. ``0.1.0+31c808a6ac53``."""
+    return f"{__version__}+{command_digest(command)}"
 
 
 @functools.cache
@@ -32,5 +124,5 @@ def code_digest() -> str:
 
 
 def code_version() -> str:
-    """``<version>+<digest>``, e.g. ``0.1.0+3f2a9c1b7e4d``."""
+    """``<version>+<digest>`` of the whole package, e.g. ``0.1.0+3f2a9c1b7e4d``."""
     return f"{__version__}+{code_digest()}"

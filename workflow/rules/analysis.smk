@@ -20,7 +20,7 @@ rule isophotes:
     benchmark:
         "results/{lens}/benchmarks/isophotes.tsv"
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("isophotes"),
     threads: 1
     resources:
         mem_mb=2000,
@@ -43,7 +43,7 @@ rule fit_quality:
     benchmark:
         "results/{lens}/benchmarks/fit_quality.tsv"
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("quality"),
         lens_dir=lens_imaging_folder,
     threads: 1
     resources:
@@ -81,7 +81,7 @@ rule summary:
     benchmark:
         "results/summary/benchmarks/summary.tsv"
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("summary"),
         reference_dir=REFERENCE_DIR,
     threads: 1
     resources:
@@ -111,7 +111,7 @@ rule recovery:
     benchmark:
         "results/{lens}/benchmarks/recovery.tsv"
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("recovery"),
     threads: 1
     resources:
         mem_mb=1000,
@@ -133,7 +133,7 @@ rule recovery_table:
     benchmark:
         "results/summary/benchmarks/recovery_table.tsv"
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("recovery"),
     threads: 1
     resources:
         mem_mb=1000,

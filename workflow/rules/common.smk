@@ -17,7 +17,7 @@ from snakemake.utils import validate
 
 from mgelens.imaging import INFO_FILE, MASK_FILE
 from mgelens.pipeline.model_choice import candidates as light_candidates
-from mgelens.provenance import code_version
+from mgelens.provenance import command_version
 from mgelens.pipeline.settings import SettingsError, settings_from_mapping
 from mgelens.sheet import SheetError, read_sample_sheet
 
@@ -38,7 +38,6 @@ if _sheet_keys:
     )
 
 REPO = Path(workflow.basedir)
-MGELENS_VERSION = code_version()  # version + source digest: any library edit reruns
 
 
 def repo_path(value: str) -> Path:

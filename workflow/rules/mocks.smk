@@ -20,7 +20,7 @@ rule simulate_mock:
     wildcard_constraints:
         lens=MOCK_LENSES,
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("simulate"),
         recipe=simulate_recipe,
         folder=mock_folder,
         image_size=config["mock"]["image_size"],

@@ -16,7 +16,7 @@ rule preview:
     benchmark:
         "results/{lens}/benchmarks/preview.tsv"
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("preview"),
         folder=lens_imaging_folder,
         pixel_scale=pixel_scale_option,
     threads: 1
@@ -45,7 +45,7 @@ rule overview:
     benchmark:
         "results/{lens}/benchmarks/overview.tsv"
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("overview"),
         lens_dir=lens_imaging_folder,
     threads: 1
     resources:

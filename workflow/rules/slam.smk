@@ -27,7 +27,7 @@ rule phase:
     benchmark:
         "results/{lens}/benchmarks/{phase}.tsv"
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("phase"),
         phase=phase_name,
         lens_dir=lens_imaging_folder,
         options=phase_options,
@@ -84,7 +84,7 @@ rule choose_light:
     benchmark:
         "results/{lens}/benchmarks/choose_light.tsv"
     params:
-        mgelens_version=MGELENS_VERSION,
+        mgelens_version=command_version("choose"),
         candidates=light_candidate_labels,
         threshold=config["model_choice_threshold"],
     threads: 1

@@ -66,7 +66,7 @@ from mgelens.light import MGESet, Sersic
 from mgelens.mass import EPL, SIE, ExternalShear
 from mgelens.pipeline import fittable, models, products, sp_start
 from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
-from mgelens.provenance import code_version
+from mgelens.provenance import command_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
@@ -372,7 +372,8 @@ def sampler_for(settings: SamplerSettings, n_free: int) -> SamplerSettings:
 def problem_fingerprint(problem: PhaseProblem, checksums: dict) -> dict:
     """Everything a phase's likelihood and priors depend on: the parameter space, the model
     (lens-light sets, source mesh, regularization, interpolation), the fit settings, a hash
-    of the mask, the positions penalty, the input checksums and the package version."""
+    of the mask, the positions penalty, the input checksums and the version of the code
+    that fits (:func:`~mgelens.provenance.command_version` of ``mgelens phase``)."""
     mask = np.ascontiguousarray(problem.dataset.mask)
     return {
         "phase": problem.name,
@@ -382,7 +383,7 @@ def problem_fingerprint(problem: PhaseProblem, checksums: dict) -> dict:
         "mask": hashlib.sha256(mask.tobytes() + str(mask.shape).encode()).hexdigest(),
         "positions": None if problem.positions is None else problem.positions.describe(),
         "inputs": checksums,
-        "version": code_version(),
+        "version": command_version("phase"),
     }
 
 
