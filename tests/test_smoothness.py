@@ -42,40 +42,25 @@ the paper's criterion, no jump above 0.5, on meshes 1–3 (largest 0.41, 0.46, 0
 0.88), where the anchor's rules jump by 1.69 and 1.48 (meshes 1–2).
 """
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
-from mgelens.fit import FitDataset, FitSettings, LensModel, PixelizedSource, fit
-from mgelens.grid import pixel_centres
-from mgelens.light import MGESet
 from mgelens.mask import circular
-from mgelens.mass import EPL
 from mgelens.simulate import paper_mock, simulate
-from mgelens.source.image_mesh import kmeans_centres, kmeans_weights
+from mgelens.smoothness import evidence_scan as scheme_scan
+from mgelens.smoothness import jumps, mock_dataset, scan_model
 from mgelens.source.regularization import AdaptiveBrightnessSplit, Constant, ConstantSplit
 
 STEP = 0.0004
 N_STEPS = 200
 N_SOURCE_PIXELS = 500
-TREND_HALF_WIDTH = 5
 MESH_SEEDS = (1, 2, 3)
 
 
 def scan_setup(dataset, lens, adapt, n_pixels, seed):
-    """(dataset, true EPL, two-set lens light, k-means mesh centres) of a scan."""
-    x, y = pixel_centres(dataset.mask.shape, dataset.imaging.pixel_scale)
-    weights = kmeans_weights(adapt, weight_floor=0.2, weight_power=1.0)
-    used = ~dataset.mask
-    mesh_x, mesh_y = kmeans_centres(x[used], y[used], weights, n_pixels, seed)
-    centre = tuple(lens.mass[0].centre)
-    pixel_scale = dataset.imaging.pixel_scale
-    light = (
-        MGESet.extended(centre, (0.05, 0.03), pixel_scale, lens.mask_radius),
-        MGESet.extended(centre, (-0.1, 0.1), pixel_scale, lens.mask_radius),
-    )
-    return dataset, lens.mass[0], light, mesh_x, mesh_y
+    """(dataset, scan model) of a scan: the true EPL, two MGE sets, k-means mesh centres."""
+    model = scan_model(dataset, lens.mass[0], adapt, lens.mask_radius, n_pixels, seed)
+    return dataset, model
 
 
 @pytest.fixture(scope="module", params=MESH_SEEDS)
@@ -88,9 +73,8 @@ def m1_setup(request, m1_dataset):
 def continuous_dataset(m1_dataset):
     """The same mock, mask and settings with the continuous edge rule."""
     dataset, lens, _ = m1_dataset
-    settings = replace(dataset.settings, edge_rule="continuous")
     centre = tuple(lens.mass[0].centre)
-    return FitDataset.from_imaging(dataset.imaging, dataset.mask, settings, light_centre=centre)
+    return mock_dataset(dataset.imaging, dataset.mask, centre, edge_rule="continuous")
 
 
 @pytest.fixture(scope="module")
@@ -105,9 +89,7 @@ def m1_dataset():
     mock = simulate(lens)
     imaging = mock.imaging
     mask = circular(imaging.shape, imaging.pixel_scale, lens.mask_radius)
-    settings = FitSettings(force_edge_pixels_to_zero=False)
-    centre = tuple(lens.mass[0].centre)
-    dataset = FitDataset.from_imaging(imaging, mask, settings, light_centre=centre)
+    dataset = mock_dataset(imaging, mask, tuple(lens.mass[0].centre))
     return dataset, lens, mock.lensed_source_blurred[~mask]
 
 
@@ -116,30 +98,11 @@ def evidence_scan(
 ):
     """ln ε at the slopes truth − STEP·N_STEPS/2 + STEP·k, k = ``steps`` (default
     0 … N_STEPS − 1), on ``dataset`` (default the setup's)."""
-    setup_dataset, truth, light, mesh_x, mesh_y = m1_setup
+    setup_dataset, model = m1_setup
     dataset = setup_dataset if dataset is None else dataset
     steps = np.arange(N_STEPS) if steps is None else steps
-    source = PixelizedSource(mesh_x, mesh_y, regularization, interpolation, adapt_image)
-    slopes = truth.slope - STEP * N_STEPS / 2 + STEP * steps
-    values = []
-    for slope in slopes:
-        mass = EPL(
-            centre=truth.centre,
-            einstein_radius=truth.einstein_radius,
-            axis_ratio=truth.axis_ratio,
-            angle=truth.angle,
-            slope=float(slope),
-        )
-        values.append(fit(dataset, LensModel((mass,), light, (), source)).log_evidence)
-    return np.array(values)
-
-
-def jumps(values):
-    """|step change − running median of the step changes over ±TREND_HALF_WIDTH steps|."""
-    steps = np.diff(values)
-    k = TREND_HALF_WIDTH
-    trend = np.array([np.median(steps[max(0, i - k) : i + k + 1]) for i in range(steps.size)])
-    return np.abs(steps - trend)
+    slopes = model.mass.slope - STEP * N_STEPS / 2 + STEP * steps
+    return scheme_scan(dataset, model, interpolation, slopes, regularization, adapt_image)
 
 
 def refined_jump(m1_setup, step, n_sub, dataset=None):

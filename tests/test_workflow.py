@@ -61,6 +61,7 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert counts["overview"] == 3
     assert counts["recovery"] == 3
     assert counts["recovery_table"] == 1
+    assert counts["smoothness"] == 1  # Appendix A scan of M1
     assert counts["summary"] == 1
     assert counts["all"] == 1
     assert not list(tmp_path.iterdir()) or {p.name for p in tmp_path.iterdir()} <= {".snakemake"}
@@ -101,6 +102,7 @@ def test_dry_run_of_the_population_sample(tmp_path):
     assert result.returncode == 0, result.stderr
     counts = job_counts(result.stdout + result.stderr)
     assert counts["simulate_mock"] == counts["preview"] == sim.POPULATION_SIZE
+    assert "smoothness" not in counts  # no M1 in the population
 
 
 def test_dry_run_of_the_slacs_sample_reads_the_data_in_place(tmp_path, slacs_dir):
@@ -514,6 +516,17 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     recovered = pd.read_csv(tmp_path / "results" / "summary" / "recovery.csv")
     assert list(recovered["lens"]) == ["M1"]
     assert recovered["mass.slope.truth"].iloc[0] == pytest.approx(2.1)
+    scan = pd.read_csv(tmp_path / "results" / "summary" / "smoothness.csv")
+    assert set(zip(scan["scheme"], scan["edge_rule"], strict=True)) == {
+        ("natural_neighbour", "anchor"), ("nearest", "anchor"),
+        ("natural_neighbour", "continuous"), ("nearest", "continuous"),
+    }  # fmt: skip
+    assert (tmp_path / "results" / "summary" / "smoothness.png").stat().st_size > 20_000
+    report = snakemake(f"--configfile={config}", "--report", "report.html", workdir=tmp_path)
+    assert report.returncode == 0, report.stdout + report.stderr
+    html = (tmp_path / "report.html").read_text()
+    for figure in ("preview.png", "overview.png", "histograms.png", "smoothness.png"):
+        assert figure in html
 
     (lens / "mass" / "result.json").unlink()
     target = "results/M1/mass/result.json"

@@ -142,3 +142,32 @@ rule recovery_table:
         "../envs/mgelens.yaml"
     shell:
         "mgelens recovery --table {input:q} --out {output:q} > {log:q} 2>&1"
+
+
+rule smoothness:
+    input:
+        unpack(smoothness_inputs),
+    output:
+        figure=report(
+            "results/summary/smoothness.png",
+            caption="../report/smoothness.rst",
+            category="Mocks",
+        ),
+        table="results/summary/smoothness.csv",
+    log:
+        "logs/smoothness.log",
+    benchmark:
+        "results/summary/benchmarks/smoothness.tsv"
+    params:
+        mgelens_version=command_version("smoothness"),
+        folder=smoothness_folder,
+        mask_radius=smoothness_mask_radius,
+    threads: 1
+    resources:
+        mem_mb=1500,
+        runtime=15,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens smoothness --lens-dir {params.folder:q} --mask-radius {params.mask_radius} "
+        "--out {output.figure:q} --table {output.table:q} --threads {threads} > {log:q} 2>&1"

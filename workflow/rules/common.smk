@@ -242,14 +242,44 @@ def recovery_records(wildcards) -> list[str]:
     return [f"results/{lens}/recovery.json" for lens in LENSES.index[LENSES["kind"] == "mock"]]
 
 
+SMOOTHNESS_MOCK = "M1"
+"""The paper mock of the Appendix A scan (rule smoothness)."""
+SMOOTHNESS_LENSES = list(
+    LENSES.index[(LENSES["kind"] == "mock") & (LENSES["mock"] == SMOOTHNESS_MOCK)]
+)
+"""Lenses of the sheet simulated as that mock; the scan reads the first one's folder."""
+
+
+def smoothness_inputs(wildcards) -> dict:
+    """The mock folder's files that rule smoothness reads."""
+    folder = f"results/{SMOOTHNESS_LENSES[0]}/mock"
+    names = ("data", "noise_map", "psf", "lensed_source_blurred")
+    return {
+        **{name: f"{folder}/{name}.fits" for name in names},
+        "truth": f"{folder}/truth.json",
+    }
+
+
+def smoothness_folder(wildcards) -> str:
+    return f"results/{SMOOTHNESS_LENSES[0]}/mock"
+
+
+def smoothness_mask_radius(wildcards) -> float:
+    """The scanned lens's mask radius from the sheet, as its phases use."""
+    return float(lens_row(SMOOTHNESS_LENSES[0])["mask_radius"])
+
+
 def all_targets() -> list[str]:
     """Default target: previews and overview figures, the sample summary and its figures
-    (which need every lens's SLaM chain, isophotes and quality record) and, if the sample
-    has mocks, the table of their recovered truth."""
+    (which need every lens's SLaM chain, isophotes and quality record), and, if the sample
+    has mocks, the table of their recovered truth and, if one of them is M1, the
+    Appendix A smoothness scan."""
     targets = [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
     targets += [f"results/{lens}/figures/overview.png" for lens in LENSES.index]
     if (LENSES["kind"] == "mock").any():
         targets.append("results/summary/recovery.csv")
+    if SMOOTHNESS_LENSES:
+        targets.append("results/summary/smoothness.png")
     summary = ("lenses.csv", "histograms.png", "einstein_radii.png", "residual_mosaic.png")
     return targets + [f"results/summary/{name}" for name in summary]
 
