@@ -229,6 +229,42 @@ def test_a_target_of_a_lens_not_in_the_sheet_names_the_sheet_and_its_lenses(tmp_
     assert message in result.stdout + result.stderr
 
 
+def test_the_paper_mock_comparison_is_nine_rows_each_with_its_lens_light_model(tmp_path):
+    targets = [f"results/{lens}/sp/result.json" for lens in ("M1", "M1_pn", "M1_sersic")]
+    result = snakemake(
+        "-n", "-p", "--configfile=config/paper_mocks.yaml", *targets, workdir=tmp_path
+    )
+    assert result.returncode == 0, result.stderr
+    output = result.stdout + result.stderr
+    slam = '--slam \'{{"lens_light_model": "{}", "positive_only": {}, "profile": "quick"}}\''
+    assert "--results results/M1 " in output
+    assert slam.format("mge", "true") in output
+    assert slam.format("mge", "false") in output
+    assert slam.format("sersic", "false") in output
+    whole = snakemake("-n", "--configfile", "config/paper_mocks.yaml", workdir=tmp_path)
+    counts = job_counts(whole.stdout + whole.stderr)
+    assert counts["simulate_mock"] == 9
+    assert counts["phase"] == 27
+    assert counts["mock_study"] == counts["smoothness"] == 1
+    sheet = pd.read_csv(ROOT / "config" / "paper_mocks.tsv", sep="\t")
+    assert (
+        sorted(sheet.groupby("mock")["lens_light"].apply(sorted).tolist())
+        == [["nn_mge", "pn_mge", "sersic"]] * 3
+    )
+
+
+def test_a_lens_light_column_and_a_slam_lens_light_setting_contradict(tmp_path):
+    header = SHEET_HEADER.replace("point_set\t", "point_set\tlens_light\t")
+    (tmp_path / "sheet.tsv").write_text(
+        header + "M1\tmock\tM1\t\t1.8\t4\tyes\tpn_mge\t0.28\t0.98\n"
+    )
+    config = f"samples: {tmp_path / 'sheet.tsv'}\nslam:\n  positive_only: false\n"
+    (tmp_path / "config.yaml").write_text(config)
+    result = snakemake("-n", "--configfile", str(tmp_path / "config.yaml"), workdir=tmp_path)
+    assert result.returncode != 0
+    assert "slam.positive_only contradicts the `lens_light` column" in result.stdout + result.stderr
+
+
 def test_one_phases_sampler_settings_reach_that_phase_only(tmp_path):
     (tmp_path / "config.yaml").write_text("slam:\n  samplers:\n    mass: {n_live: 80}\n")
     result = snakemake(
@@ -525,8 +561,15 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     report = snakemake(f"--configfile={config}", "--report", "report.html", workdir=tmp_path)
     assert report.returncode == 0, report.stdout + report.stderr
     html = (tmp_path / "report.html").read_text()
-    for figure in ("preview.png", "overview.png", "histograms.png", "smoothness.png"):
+    for figure in ("preview.png", "overview.png", "histograms.png", "smoothness.png",
+                   "lens_light_nn_mge.png", "mock_table.md"):  # fmt: skip
         assert figure in html
+    table3 = pd.read_csv(tmp_path / "results" / "summary" / "mock_table.csv")
+    assert set(table3["parameter"]) == {
+        "centre_x", "centre_y", "einstein_radius", "axis_ratio", "angle", "slope",
+    }  # fmt: skip
+    assert set(table3["model"]) == {"nn_mge"}
+    assert (tmp_path / "results" / "summary" / "lens_light_nn_mge.png").stat().st_size > 20_000
 
     (lens / "mass" / "result.json").unlink()
     target = "results/M1/mass/result.json"
@@ -538,7 +581,7 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     counts = job_counts(after.stdout + after.stderr)
     assert counts == {
         "fit_quality": 1, "isophotes": 1, "overview": 1, "recovery": 1, "recovery_table": 1,
-        "summary": 1, "all": 1, "total": 7,
+        "mock_study": 1, "summary": 1, "all": 1, "total": 8,
     }  # fmt: skip
 
 

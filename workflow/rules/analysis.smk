@@ -171,3 +171,41 @@ rule smoothness:
     shell:
         "mgelens smoothness --lens-dir {params.folder:q} --mask-radius {params.mask_radius} "
         "--out {output.figure:q} --table {output.table:q} --threads {threads} > {log:q} 2>&1"
+
+
+rule mock_study:
+    input:
+        mock_study_inputs,
+    output:
+        table="results/summary/mock_table.csv",
+        markdown=report(
+            "results/summary/mock_table.md",
+            caption="../report/mock_table.rst",
+            category="Mocks",
+        ),
+        annuli="results/summary/mock_light_annuli.csv",
+        figures=[
+            report(
+                f"results/summary/lens_light_{model}.png",
+                caption="../report/lens_light.rst",
+                category="Mocks",
+            )
+            for model in PAPER_MOCK_MODELS
+        ],
+    log:
+        "logs/mock_study.log",
+    benchmark:
+        "results/summary/benchmarks/mock_study.tsv"
+    params:
+        mgelens_version=command_version("mockstudy"),
+        fits=mock_study_fits,
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens mockstudy {params.fits} --results results --out-table {output.table:q} "
+        "--out-markdown {output.markdown:q} --out-annuli {output.annuli:q} "
+        "--figures-dir results/summary > {log:q} 2>&1"

@@ -16,6 +16,8 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
 from mgelens.imaging import INFO_FILE, MASK_FILE
+from mgelens.mock_study import MODELS as MOCK_STUDY_MODELS
+from mgelens.mock_study import PAPER_MOCKS
 from mgelens.pipeline.model_choice import candidates as light_candidates
 from mgelens.provenance import command_version
 from mgelens.pipeline.settings import SettingsError, settings_from_mapping
@@ -38,6 +40,13 @@ if _sheet_keys:
     )
 
 REPO = Path(workflow.basedir)
+
+LENS_LIGHT_SETTINGS = {
+    "nn_mge": {"positive_only": True, "lens_light_model": "mge"},
+    "pn_mge": {"positive_only": False, "lens_light_model": "mge"},
+    "sersic": {"positive_only": False, "lens_light_model": "sersic"},
+}
+"""slam: settings of each value of the sheet's `lens_light` column (empty: nn_mge)."""
 
 
 def repo_path(value: str) -> Path:
@@ -66,6 +75,21 @@ try:
 except WorkflowError as error:
     raise WorkflowError(f"sample sheet {SAMPLE_SHEET}: {error}") from None
 DATA_DIR = repo_path(config["data_dir"])
+if "lens_light" in LENSES.columns:
+    _light_keys = [key for key in LENS_LIGHT_SETTINGS["nn_mge"] if key in config["slam"]]
+    if _light_keys:
+        raise WorkflowError(
+            f"config: slam.{_light_keys[0]} contradicts the `lens_light` column of the sample "
+            f"sheet {SAMPLE_SHEET}, which sets it per lens ({', '.join(LENS_LIGHT_SETTINGS)}); "
+            "remove it from the config's slam: section or the column from the sheet"
+        )
+
+
+def lens_light_model_name(lens: str) -> str:
+    """The lens's `lens_light` cell (nn_mge where the column or the cell is empty)."""
+    if "lens_light" not in LENSES.columns or pd.isna(LENSES.loc[lens, "lens_light"]):
+        return "nn_mge"
+    return LENSES.loc[lens, "lens_light"]
 
 
 def lens_row(lens: str) -> pd.Series:
@@ -269,6 +293,30 @@ def smoothness_mask_radius(wildcards) -> float:
     return float(lens_row(SMOOTHNESS_LENSES[0])["mask_radius"])
 
 
+PAPER_MOCK_FITS = [
+    (lens, LENSES.loc[lens, "mock"], lens_light_model_name(lens))
+    for lens in LENSES.index[(LENSES["kind"] == "mock") & LENSES["mock"].isin(PAPER_MOCKS)]
+]
+"""(lens, mock, lens-light model) of every sheet row that fits a paper mock (rule
+mock_study)."""
+PAPER_MOCK_MODELS = [m for m in MOCK_STUDY_MODELS if any(f[2] == m for f in PAPER_MOCK_FITS)]
+"""Lens-light models among them, in the paper's order: one Figure 5-7 each."""
+
+
+def mock_study_inputs(wildcards) -> list[str]:
+    """What the mock study (rule mock_study) reads of each paper-mock fit, its recovery
+    record, MASS result and model image, and its mock's data, true lens light and truth."""
+    names = (
+        "recovery.json", "mass/result.json", "mass/model.fits", "mock/data.fits",
+        "mock/lens_light_blurred.fits", "mock/truth.json",
+    )  # fmt: skip
+    return [f"results/{lens}/{name}" for lens, _, _ in PAPER_MOCK_FITS for name in names]
+
+
+def mock_study_fits(wildcards) -> str:
+    return " ".join(f"--fit {lens} {mock} {model}" for lens, mock, model in PAPER_MOCK_FITS)
+
+
 def all_targets() -> list[str]:
     """Default target: previews and overview figures, the sample summary and its figures
     (which need every lens's SLaM chain, isophotes and quality record), and, if the sample
@@ -280,6 +328,8 @@ def all_targets() -> list[str]:
         targets.append("results/summary/recovery.csv")
     if SMOOTHNESS_LENSES:
         targets.append("results/summary/smoothness.png")
+    if PAPER_MOCK_FITS:
+        targets.append("results/summary/mock_table.csv")
     summary = ("lenses.csv", "histograms.png", "einstein_radii.png", "residual_mosaic.png")
     return targets + [f"results/summary/{name}" for name in summary]
 
@@ -379,14 +429,23 @@ def light_candidate_labels(wildcards) -> str:
 
 
 def phase_settings(wildcards) -> str:
-    """The config's slam: section as JSON, with the sampler settings of this phase only, so
-    that changing one phase's sampler reruns that phase (and the phases after it) only."""
-    section = dict(config["slam"])
+    """The config's slam: section as JSON, with the lens's `lens_light` settings
+    (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
+    changing one phase's sampler reruns that phase (and the phases after it) only."""
+    section = {**config["slam"], **lens_light_settings(wildcards.lens)}
     samplers = section.pop("samplers", None) or {}
     phase = phase_name(wildcards)
     if phase in samplers:
         section["samplers"] = {phase: samplers[phase]}
     return json.dumps(section, sort_keys=True)
+
+
+def lens_light_settings(lens: str) -> dict:
+    """The slam: settings of the lens's `lens_light` cell ({} without that column, so that
+    a sheet without it keeps the config's settings and its phases' --slam unchanged)."""
+    if "lens_light" not in LENSES.columns:
+        return {}
+    return dict(LENS_LIGHT_SETTINGS[lens_light_model_name(lens_row(lens)["lens"])])
 
 
 def phase_name(wildcards) -> str:
