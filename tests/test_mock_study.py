@@ -115,7 +115,7 @@ def test_the_lens_light_figure_has_one_column_per_fit_with_colour_bars():
     assert images[0].get_xlabel() == "x [arcsec]"
     assert images[0].get_xlim() == pytest.approx((-0.99, 0.99))
     assert any(ax.collections for ax in images[3:])  # contours of data − lens light
-    assert figure.get_suptitle().startswith("pn-MGE: lens-light error")
+    assert figure.get_suptitle().startswith("pn-MGE: lens-light error (top),\nnormalised")
 
 
 def test_the_command_names_a_bad_fit_or_a_missing_record(tmp_path, caplog):

@@ -90,8 +90,8 @@ def lens_light_figure(model: str, panels: Sequence[LightPanel]) -> Figure:
         bar = figure.colorbar(bottom, ax=axes[1, :].tolist(), shrink=0.9)
         bar.set_label("(data − model)/σ")
     figure.suptitle(
-        f"{MODEL_LABELS.get(model, model)}: lens-light error (top), normalised residuals "
+        f"{MODEL_LABELS.get(model, model)}: lens-light error (top),\nnormalised residuals "
         "with contours of data − lens light (bottom)",
-        fontsize=11,
+        fontsize=10,
     )
     return figure
