@@ -18,7 +18,9 @@ from mgelens.imaging import Imaging
 from mgelens.mass import SIE, ExternalShear, ray_trace
 from mgelens.pipeline import models, phases, sp_start
 from mgelens.pipeline.settings import profile_settings, settings_from_mapping
-from mgelens.search.priors import TruncatedGaussian, passed_prior
+from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
+from mgelens.search.model import ParameterSpace
+from mgelens.search.priors import TruncatedGaussian, Uniform, passed_prior
 
 ROOT = Path(__file__).resolve().parents[1]
 PIXEL = 0.1
@@ -105,6 +107,9 @@ def test_search_finds_the_mocks_mass_from_nothing_but_the_data(mock_problem, moc
         1 + np.hypot(values["mass.ell_comps_1"], values["mass.ell_comps_2"])
     )
     assert abs(q - truth.axis_ratio) < 0.1
+    light = (values["lens_light.set_0.centre_x"], values["lens_light.set_0.centre_y"])
+    assert abs(values["mass.centre_x"] - light[0]) <= sp_start.MASS_CENTRE_RANGE
+    assert abs(values["mass.centre_y"] - light[1]) <= sp_start.MASS_CENTRE_RANGE
     assert mock_start.n_arc_pixels >= sp_start.MIN_ARC_PIXELS
     assert mock_start.n_calls <= sp_start.LIGHT_CALLS + sp_start.POLISH_CALLS + 50
     # the polished point beats the anchor-prior medians and the arcs' start
@@ -209,6 +214,27 @@ def test_light_stage_stays_in_its_box(mock_problem):
         mean = float(space.priors[i].transform(0.5))
         assert lower < mean < upper
         assert upper - lower <= 2 * sp_start.LIGHT_ELL_COMPS_RANGE + 1e-12
+
+
+def test_the_polish_keeps_the_mass_centre_in_its_box_around_the_light():
+    """A likelihood that pulls the mass 1.6″ away (as slacs1250+0523's did) gets the box's
+    edge, not its own optimum; inside the box the posterior is the likelihood + prior."""
+    space = ParameterSpace.from_priors(
+        {"mass.centre_x": Uniform(-3.0, 3.0), "mass.centre_y": Uniform(-3.0, 3.0)}
+    )
+
+    def likelihood(x):
+        return -((x[0] + 1.6) ** 2) - (x[1] - 0.3) ** 2
+
+    half = sp_start.MASS_CENTRE_RANGE
+    posterior = sp_start._Posterior(likelihood, space).boxed({0: (-half, half), 1: (-half, half)})
+    inside = np.array([0.1, 0.2])
+    assert posterior(inside) == pytest.approx(likelihood(inside) + space.log_prior(inside))
+    assert posterior(np.array([-0.31, 0.0])) == REJECTED_LOG_LIKELIHOOD
+    x, value = sp_start._maximise(posterior, np.zeros(2), [0, 1], None, 400)
+    assert abs(x[0] + half) < 0.01
+    assert abs(x[1] - 0.3) < 0.01
+    assert value == pytest.approx(likelihood(x) + space.log_prior(x))
 
 
 def test_dataset_pixel_centres_are_the_unmasked_pixels(mock_problem):
