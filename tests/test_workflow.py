@@ -6,9 +6,7 @@ is written into the repository.
 
 import json
 import re
-import subprocess
 import tomllib
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -21,22 +19,13 @@ from workflow_run import (
     BACKGROUND_LENS,
     CHAIN_TIMEOUT,
     ROOT,
-    snakemake_command,
-    snakemake_environment,
+    snakemake,
 )
 
 from mgelens import cli
 from mgelens import simulate as sim
 from mgelens.recovery import true_mass_parameters
 from mgelens.sheet import read_sample_sheet
-
-
-def snakemake(*args: str, workdir: Path, timeout: float = 600) -> subprocess.CompletedProcess:
-    """Run snakemake on the repository's Snakefile with working directory ``workdir``."""
-    return subprocess.run(
-        snakemake_command(*args, workdir=workdir), cwd=ROOT, capture_output=True, text=True,
-        env=snakemake_environment(), timeout=timeout,
-    )  # fmt: skip
 
 
 def job_counts(output: str) -> dict[str, int]:

@@ -2,6 +2,7 @@
 Snakefile, from the repository root, with a working directory of the test's own."""
 
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -32,3 +33,11 @@ def snakemake_environment() -> dict[str, str]:
     environment = dict(os.environ, MPLBACKEND="Agg")
     environment["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{environment['PATH']}"
     return environment
+
+
+def snakemake(*args: str, workdir: Path, timeout: float = 600) -> subprocess.CompletedProcess:
+    """Run snakemake on the repository's Snakefile with working directory ``workdir``."""
+    return subprocess.run(
+        snakemake_command(*args, workdir=workdir), cwd=ROOT, capture_output=True, text=True,
+        env=snakemake_environment(), timeout=timeout,
+    )  # fmt: skip

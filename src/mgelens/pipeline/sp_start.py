@@ -65,8 +65,8 @@ LIGHT_CENTRE_RANGE = 0.3
 """Half-width (arcsec) of the lens-light stage's box around the light centre's prior mean."""
 MASS_CENTRE_RANGE = 0.3
 """Half-width (arcsec) of the polish's box for the mass centre around the fitted light
-centre: on slacs1250+0523 the unboxed polish moved the mass 1.6″ from the light, into a
-mass that lenses nothing, where the 20-Gaussian source drew the arcs unlensed."""
+centre: unboxed, the polish can carry the mass far from the light into a mass that
+lenses nothing, where the source draws the arcs unlensed (docs/slacs.md)."""
 LIGHT_ELL_COMPS_RANGE = 0.6
 """Bound of |ell_comps| in the lens-light stage."""
 ARC_SIGNIFICANCE = 3.0
