@@ -12,7 +12,7 @@ from mgelens.convolve import convolve_image
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.mask import circular
-from mgelens.mass import SIE, ExternalShear
+from mgelens.mass import EPL, SIE, ExternalShear
 from mgelens.simulate import gaussian_psf
 
 PIXEL = 0.05
@@ -166,7 +166,8 @@ def phase(tmp_path, scene):
     settings = {"lens_dir": str(lens_dir), "mask_radius": RADIUS, "slam": {"mask_centre": [0, 0]}}
     sie = {"centre": [0.0, 0.0], "einstein_radius": 1.2, "axis_ratio": 1.0, "angle": 0.0}
     mass = [{"type": "SIE", "parameters": sie}]
-    record = {"settings": settings, "max_likelihood_fit": {"mass": mass}}
+    light = {"components": [{"kind": "mge", "centre": [0.02, -0.01], "ell_comps": [0.0, 0.0]}]}
+    record = {"settings": settings, "max_likelihood_fit": {"mass": mass, "lens_light": light}}
     (folder / "result.json").write_text(json.dumps(record))
     nresid = rng.standard_normal(SHAPE) + blob(scene, (1.5, 1.5), 2.5)
     nresid[scene["mask"]] = 0.0
@@ -244,6 +245,30 @@ def test_the_critical_curve_must_lie_inside_the_fit_circle(radius, centre, mask_
     mask_radius = 2.0 if mask_centre != (0.0, 0.0) else 3.0
     check = quality.lensing_check((SIE(centre, radius, 1.0, 0.0),), mask_radius, mask_centre)
     assert check.flag is flagged
+
+
+def test_a_critical_curve_beside_the_lens_light_is_flagged():
+    """slacs1250+0523's first MASS mass (docs/slacs.md): an EPL 1.9″ from the light with a
+    0.15″ critical curve, which lenses nothing the galaxy holds."""
+    beside = (EPL((-1.9305, 0.4204), 0.1701, 0.5986, 65.363, 2.9034),
+              ExternalShear(-0.0434, -0.0684))  # fmt: skip
+    assert not quality.lensing_check(beside, 3.0).flag  # the old checks pass it
+    check = quality.lensing_check(beside, 3.0, light_centre=(-0.002, 0.005))
+    assert check.flag
+    assert "does not enclose the lens-light centre" in check.reason
+    assert check.critical_curve_einstein_radius == pytest.approx(0.15, abs=0.02)
+    # a mass 0.3″ from the light still encloses it
+    near = (SIE((0.3, 0.0), 1.0, 0.8, 20.0),)
+    assert not quality.lensing_check(near, 3.0, light_centre=(0.0, 0.0)).flag
+
+
+def test_encloses_follows_the_even_odd_rule():
+    t = np.linspace(0.0, 2.0 * np.pi, 101)
+    x, y = np.cos(t), 0.5 * np.sin(t)
+    assert quality.encloses(x, y, (0.0, 0.0))
+    assert quality.encloses(x, y, (0.9, 0.0))
+    assert not quality.encloses(x, y, (0.0, 0.6))
+    assert not quality.encloses(x, y, (-1.1, 0.0))
 
 
 def test_quality_command_names_a_missing_extension(phase, caplog):

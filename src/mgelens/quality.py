@@ -41,8 +41,9 @@ reproduce the image itself, arcs included, with residuals of pure noise. Flagged
 tangential critical curve (SPEC §3.4) within ``mask_radius`` of the mask centre, or a
 needle-thin one, whose circle-equivalent radius √(area/π) is below
 :data:`MIN_CURVE_ROUNDNESS` of its half length (an elliptical curve of axis ratio q_c has
-the ratio √q_c: 0.45 for an SIE of q = 0.2). Both are failure modes of SP on real data
-(docs/slacs.md, "First real lens").
+the ratio √q_c: 0.45 for an SIE of q = 0.2), or one that does not enclose the lens-light
+centre (a small curve of a mass beside the galaxy). All three are failure modes of SP on
+real data (docs/slacs.md, "First real lens" and "slacs1250+0523").
 """
 
 import math
@@ -299,7 +300,8 @@ class LensingCheck:
 
     ``critical_curve_einstein_radius`` is √(area/π) of the tangential critical curve in
     arcsec (``None`` without a closed curve in the circle); ``flag`` is True when there is
-    no such curve or it is needle-thin, with the ``reason``.
+    no such curve, it is needle-thin or it leaves the lens-light centre outside, with the
+    ``reason``.
     """
 
     critical_curve_einstein_radius: float | None
@@ -310,14 +312,27 @@ class LensingCheck:
         return asdict(self)
 
 
+def encloses(x: np.ndarray, y: np.ndarray, point: tuple[float, float]) -> bool:
+    """Whether the closed polyline (x, y) encloses ``point`` (even-odd rule: a ray from the
+    point towards +x crosses the polyline an odd number of times)."""
+    x0, y0 = point
+    x1, y1, x2, y2 = x[:-1], y[:-1], x[1:], y[1:]
+    straddles = (y1 > y0) != (y2 > y0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        crossing = x1 + (y0 - y1) * (x2 - x1) / (y2 - y1)
+    return bool(np.count_nonzero(straddles & (crossing > x0)) % 2)
+
+
 def lensing_check(
     mass: tuple[MassProfile, ...],
     mask_radius: float,
     mask_centre: tuple[float, float] = (0.0, 0.0),
     grid_spacing: float = 0.02,
+    light_centre: tuple[float, float] | None = None,
 ) -> LensingCheck:
     """Flag a mass model without a closed tangential critical curve inside the circle of
-    ``mask_radius`` (arcsec) around ``mask_centre``, or with a needle-thin one (SPEC §3.4
+    ``mask_radius`` (arcsec) around ``mask_centre``, with a needle-thin one, or (given the
+    lens-light centre ``light_centre``, arcsec) with one that does not enclose it (SPEC §3.4
     grid of ``grid_spacing``; module docstring)."""
     half_width = abs(mask_centre[0]) + abs(mask_centre[1]) + mask_radius
     try:
@@ -335,6 +350,14 @@ def lensing_check(
             f"beyond the {mask_radius:g}″ fit circle",
         )
     radius = circle_equivalent_radius(x, y)
+    if light_centre is not None and not encloses(x, y, light_centre):
+        return LensingCheck(
+            radius,
+            True,
+            f"the tangential critical curve (√(area/π) = {radius:.2f}″, centred near "
+            f"({np.mean(x):.2f}, {np.mean(y):.2f})″) does not enclose the lens-light centre "
+            f"({light_centre[0]:.2f}, {light_centre[1]:.2f})″",
+        )
     half_length = 0.5 * float(np.max(np.hypot(x[:, None] - x, y[:, None] - y)))
     if radius < MIN_CURVE_ROUNDNESS * half_length:
         return LensingCheck(

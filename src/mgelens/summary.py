@@ -54,8 +54,9 @@ theta_e_over_shajib             theta_e_lt / shajib_theta_e
 quality_statistic               coherence significance K of :mod:`mgelens.quality`
 quality_peak                    largest block |z| / τ
 quality_flag                    K or the peak above its threshold (empty: not measured)
-lensing_flag                    the MASS model has no closed tangential critical curve in the
-                                fit circle (:func:`mgelens.quality.lensing_check`)
+lensing_flag                    the MASS model has no closed, galaxy-like tangential critical
+                                curve around the lens light in the fit circle
+                                (:func:`mgelens.quality.lensing_check`)
 ==============================  ==============================================================
 
 Published columns are NaN for lenses absent from a table, and all NaN (with a logged

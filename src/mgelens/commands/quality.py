@@ -16,7 +16,9 @@ any) and the lens's noise map, and writes the statistic of :mod:`mgelens.quality
      "block_arcsec": ..., "coherence_threshold": ..., "peak_threshold": ...,
      "inputs": {...}}
 
-(worst_x, worst_y in arcsec: the used-pixel centroid of the block of largest |z_b|).
+(worst_x, worst_y in arcsec: the used-pixel centroid of the block of largest |z_b|), and
+under ``lensing`` the check of :func:`mgelens.quality.lensing_check` of the phase's
+maximum-likelihood mass against the fit circle and its first lens-light component's centre.
 Exit code 1 with a one-line error for missing or inconsistent inputs.
 """
 
@@ -33,7 +35,7 @@ from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.atomic import write_json
 from mgelens.imaging import Imaging, ImagingError
 from mgelens.mask import circular
-from mgelens.pipeline.phases import MODEL_FILE, mass_model
+from mgelens.pipeline.phases import MODEL_FILE, light_components, mass_model
 from mgelens.quality import lensing_check, quality_statistic
 from mgelens.search.results import RESULT_FILE
 
@@ -93,10 +95,13 @@ def run(args: argparse.Namespace) -> int:
         statistic = quality_statistic(
             nresid, lensed, imaging.noise_map, imaging.mask, imaging.pixel_scale
         )
+        fitted = json.loads((args.phase / RESULT_FILE).read_text())["max_likelihood_fit"]
+        light = light_components(fitted)[0]
         lensing = lensing_check(
             mass_model(args.phase),
             float(settings["mask_radius"]),
             tuple(settings["slam"]["mask_centre"]),
+            light_centre=tuple(light["centre"]),
         )
     except (OSError, KeyError, ValueError, ImagingError) as exc:
         logger.error("quality of %s: %s", lens, exc)
