@@ -47,8 +47,9 @@ def test_true_mass_parameters_of_paper_and_population_mocks():
         true_mass_parameters({"mass": []})
 
 
-def fake_phase(median: dict, interval: dict):
-    return SimpleNamespace(median=median, interval=lambda sigma: interval)
+def fake_phase(median: dict, interval: dict, interval_1sigma: dict | None = None):
+    narrow = interval if interval_1sigma is None else interval_1sigma
+    return SimpleNamespace(median=median, interval=lambda sigma: interval if sigma == 3 else narrow)
 
 
 def test_mass_recovery_intervals_and_angle_wrap():
@@ -76,8 +77,23 @@ def test_mass_recovery_intervals_and_angle_wrap():
         "einstein_radius_within_2_percent": False,
         "epl_within_3sigma": False,
         "lens_light_within_5_percent": None,
+        "isophotes_within_tolerance": None,
     }
     json.dumps(summary)
+
+
+def test_mass_recovery_one_sigma_intervals():
+    truth = {"mass": [{"type": "EPL", "parameters": {
+        "centre": [0.0, 0.1], "einstein_radius": 1.0, "axis_ratio": 0.8, "angle": 179.0,
+        "slope": 2.0}}]}  # fmt: skip
+    median = {"mass.einstein_radius": 1.01, "mass.angle": 1.0}
+    wide = {"mass.einstein_radius": (0.97, 1.05), "mass.angle": (-3.0, 5.0)}
+    narrow = {"mass.einstein_radius": (1.005, 1.015), "mass.angle": (-1.5, 3.0)}
+    rows = {row.name: row for row in mass_recovery(truth, fake_phase(median, wide, narrow))}
+    assert rows["mass.einstein_radius"].within_3sigma
+    assert not rows["mass.einstein_radius"].within_1sigma
+    assert rows["mass.einstein_radius"].lower_1sigma == 1.005
+    assert rows["mass.angle"].within_1sigma  # 179° = −1° inside (−1.5°, 3°)
 
 
 def test_lens_light_recovery_excludes_the_centre_and_outside_the_mask():

@@ -50,6 +50,7 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert counts["overview"] == 3
     assert counts["recovery"] == 3
     assert counts["recovery_table"] == 1
+    assert counts["coverage"] == 1
     assert counts["smoothness"] == 1  # Appendix A scan of M1
     assert counts["summary"] == 1
     assert counts["all"] == 1
@@ -190,6 +191,19 @@ def test_bad_configuration_stops_with_a_message_naming_the_value(tmp_path, confi
     result = snakemake("-n", "--configfile", str(tmp_path / "config.yaml"), workdir=tmp_path)
     assert result.returncode != 0
     assert message in result.stdout + result.stderr
+
+
+def test_coverage_config_fits_population_and_independent_mocks(tmp_path):
+    """config/coverage.yaml: 38 population mocks and 12 independent (lenstronomy) mocks,
+    at 201 pixels, each through the chain and its recovery, gathered by rule coverage."""
+    result = snakemake("-n", "-p", "--configfile=config/coverage.yaml", workdir=tmp_path)
+    assert result.returncode == 0, result.stderr
+    output = result.stdout + result.stderr
+    counts = job_counts(output)
+    assert counts["simulate_mock"] == counts["recovery"] == 50
+    assert counts["coverage"] == 1
+    assert "mgelens simulate --independent-index 11 --population-seed 2024 --name L11 " in output
+    assert "--image-size 201" in output
 
 
 def test_comma_separated_sheet_is_named_with_the_fix(tmp_path):
@@ -531,7 +545,10 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
         "einstein_radius_within_2_percent",
         "epl_within_3sigma",
         "lens_light_within_5_percent",
+        "isophotes_within_tolerance",
     }
+    assert recovery["isophotes"]["n_compared"] > 0
+    assert (lens / "figures" / "isophote_recovery.png").stat().st_size > 20_000
     split = recovery["light_split"]
     assert split
     refit = recovery["true_light_refit"]
@@ -551,7 +568,8 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert report.returncode == 0, report.stdout + report.stderr
     html = (tmp_path / "report.html").read_text()
     for figure in ("preview.png", "overview.png", "histograms.png", "smoothness.png",
-                   "lens_light_nn_mge.png", "mock_table.md"):  # fmt: skip
+                   "lens_light_nn_mge.png", "mock_table.md",
+                   "isophote_recovery.png", "coverage.png"):  # fmt: skip
         assert figure in html
     table3 = pd.read_csv(tmp_path / "results" / "summary" / "mock_table.csv")
     assert set(table3["parameter"]) == {
@@ -570,7 +588,7 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     counts = job_counts(after.stdout + after.stderr)
     assert counts == {
         "fit_quality": 1, "isophotes": 1, "overview": 1, "recovery": 1, "recovery_table": 1,
-        "mock_study": 1, "summary": 1, "all": 1, "total": 8,
+        "coverage": 1, "mock_study": 1, "summary": 1, "all": 1, "total": 9,
     }  # fmt: skip
 
 

@@ -14,6 +14,8 @@
   refitted with its lens light replaced by the mock's true lens light, only the source
   re-solved. If the refit scores worse (Δ ln ε < 0), the data prefer the fitted lens light:
   its error is a trade the model cannot resolve, not a search that stopped short.
+* **Isophotes** (criterion: q within 0.02, PA within 2°, a₄/a within 0.005 over
+  0.5–2.5″): see :mod:`mgelens.isophote_recovery`.
 
 Angles are degrees counter-clockwise from +x and defined modulo 180°: a true angle is
 inside an interval if any of angle, angle ± 180° is. Mocks without external shear have
@@ -30,6 +32,7 @@ import pandas as pd
 
 from mgelens.fit import FitDataset, LensModel, fit
 from mgelens.grid import pixel_centres
+from mgelens.isophote_recovery import IsophoteRecovery
 from mgelens.search.results import PhaseResult
 
 EINSTEIN_RADIUS_TOLERANCE = 0.02
@@ -72,7 +75,8 @@ def true_mass_parameters(truth: Mapping) -> dict[str, float]:
 
 @dataclass(frozen=True)
 class ParameterRecovery:
-    """One true parameter against a posterior: median, 3σ interval and whether it holds."""
+    """One true parameter against a posterior: median, 3σ and 1σ central credible
+    intervals and whether each holds the truth."""
 
     name: str
     truth: float
@@ -82,23 +86,41 @@ class ParameterRecovery:
     within_3sigma: bool
     error: float
     """median − truth (angles: reduced to [−90°, 90°))."""
+    lower_1sigma: float
+    upper_1sigma: float
+    within_1sigma: bool
 
 
 def mass_recovery(truth: Mapping, phase: PhaseResult) -> list[ParameterRecovery]:
     """Every true mass parameter the phase fitted, in the order of :func:`true_mass_parameters`."""
-    median, interval = phase.median, phase.interval(3)
+    median, wide, narrow = phase.median, phase.interval(3), phase.interval(1)
     rows = []
     for name, value in true_mass_parameters(truth).items():
         if name not in median:
             continue
-        lower, upper = interval[name]
         error = median[name] - value
         candidates = [value]
         if name.endswith(".angle"):
             error = (error + 90.0) % 180.0 - 90.0
             candidates = [value - 180.0, value, value + 180.0]
-        within = any(lower <= v <= upper for v in candidates)
-        rows.append(ParameterRecovery(name, value, median[name], lower, upper, within, error))
+
+        def holds(interval, candidates=candidates) -> bool:
+            return any(interval[0] <= v <= interval[1] for v in candidates)
+
+        rows.append(
+            ParameterRecovery(
+                name=name,
+                truth=value,
+                median=median[name],
+                lower_3sigma=wide[name][0],
+                upper_3sigma=wide[name][1],
+                within_3sigma=holds(wide[name]),
+                error=error,
+                lower_1sigma=narrow[name][0],
+                upper_1sigma=narrow[name][1],
+                within_1sigma=holds(narrow[name]),
+            )
+        )
     return rows
 
 
@@ -294,10 +316,12 @@ def recovery_summary(
     light: LensLightRecovery | None,
     split: list[LightSplitAnnulus] | None = None,
     refit: TrueLightRefit | None = None,
+    isophotes: IsophoteRecovery | None = None,
 ) -> dict:
     """JSON-ready record with the three SPEC §11 criteria as booleans (and, if given, the
-    light split per annulus under ``light_split`` and the true-light refit under
-    ``true_light_refit``)."""
+    light split per annulus under ``light_split``, the true-light refit under
+    ``true_light_refit`` and the isophote recovery under ``isophotes``, whose
+    ``within_tolerance`` joins the criteria as ``isophotes_within_tolerance``)."""
     by_name = {row.name: row for row in mass}
     theta_e = by_name.get("mass.einstein_radius")
     theta_e_error = None if theta_e is None else theta_e.error / theta_e.truth
@@ -309,6 +333,7 @@ def recovery_summary(
         "lens_light": None if light is None else asdict(light),
         "light_split": None if split is None else [asdict(row) for row in split],
         "true_light_refit": None if refit is None else asdict(refit),
+        "isophotes": None if isophotes is None else isophotes.to_dict(),
         "criteria": {
             "einstein_radius_within_2_percent": None
             if theta_e_error is None
@@ -317,15 +342,25 @@ def recovery_summary(
             "lens_light_within_5_percent": None
             if light is None
             else bool(light.max_abs < LENS_LIGHT_TOLERANCE),
+            "isophotes_within_tolerance": None if isophotes is None else isophotes.within_tolerance,
         },
     }
+
+
+_ISOPHOTE_ERRORS = ("max_abs_axis_ratio_error", "max_abs_angle_error", "max_abs_a4_error")
+_ISOPHOTE_STATISTICS = ("delta_q_max", "delta_pa_max", "a4_a_extreme")
+
+
+def _number(value) -> float:
+    return np.nan if value is None else float(value)
 
 
 def recovery_table(records: list[Mapping]) -> pd.DataFrame:
     """One row per lens from :func:`recovery_summary` records: per parameter the truth,
     median and whether the 3σ interval holds it, the θ_E relative error, lens-light
     statistics, the largest lens-light and total errors of the light split (by modulus,
-    with sign), the true-light refit's Δχ² and Δ ln ε, and the three criteria."""
+    with sign), the true-light refit's Δχ² and Δ ln ε, the isophotes' largest errors and
+    fitted and true Δq_max, ΔPA_max and extreme a₄/a, and the criteria."""
     rows = []
     for record in records:
         row: dict = {"lens": record["lens"]}
@@ -345,6 +380,13 @@ def recovery_table(records: list[Mapping]) -> pd.DataFrame:
         refit = record.get("true_light_refit") or {}
         for key in ("delta_chi_squared", "delta_log_evidence"):
             row[f"true_light_refit.{key}"] = refit.get(key, np.nan)
+        isophotes = record.get("isophotes") or {}
+        for key in _ISOPHOTE_ERRORS:
+            row[f"isophotes.{key}"] = _number(isophotes.get(key))
+        for side in ("fitted", "true"):
+            statistics = isophotes.get(f"{side}_statistics") or {}
+            for key in _ISOPHOTE_STATISTICS:
+                row[f"isophotes.{side}.{key}"] = _number(statistics.get(key))
         row.update(record["criteria"])
         rows.append(row)
     return pd.DataFrame(rows)

@@ -1481,7 +1481,7 @@ def _truth(
         "z_source": lens.z_source,
         "mask_radius": lens.mask_radius,
         "lens_light": light,
-        "mass": [_mass_dict(profile) for profile in lens.mass],
+        "mass": [mass_dict(profile) for profile in lens.mass],
         "source": {
             **lens.source.to_dict(),
             "amplitude": amplitude,
@@ -1511,7 +1511,8 @@ def _truth(
 MASS_TYPES = {"EPL": EPL, "SIE": SIE, "ExternalShear": ExternalShear}
 
 
-def _mass_dict(profile) -> dict:
+def mass_dict(profile) -> dict:
+    """The ``truth.json`` entry of a mass profile: type, parameters and derived values."""
     entry = {"type": type(profile).__name__, "parameters": dataclasses.asdict(profile)}
     if isinstance(profile, EPL | SIE):
         entry["ell_comps"] = list(profile.ell_comps)

@@ -102,8 +102,16 @@ rule recovery:
         lensed_source="results/{lens}/mock/lensed_source_blurred.fits",
         result="results/{lens}/mass/result.json",
         model="results/{lens}/mass/model.fits",
+        isophotes="results/{lens}/isophotes.csv",
     output:
-        "results/{lens}/recovery.json",
+        record="results/{lens}/recovery.json",
+        figure=report(
+            "results/{lens}/figures/isophote_recovery.png",
+            caption="../report/isophote_recovery.rst",
+            category="Mocks",
+            subcategory="Isophote recovery",
+            labels={"lens": "{lens}"},
+        ),
     wildcard_constraints:
         lens=MOCK_LENSES,
     log:
@@ -120,7 +128,9 @@ rule recovery:
         "../envs/mgelens.yaml"
     shell:
         "mgelens recovery --lens-dir results/{wildcards.lens}/mock "
-        "--phase results/{wildcards.lens}/mass --out {output:q} --threads {threads} > {log:q} 2>&1"
+        "--phase results/{wildcards.lens}/mass --isophotes {input.isophotes:q} "
+        "--isophote-figure {output.figure:q} --out {output.record:q} --threads {threads} "
+        "> {log:q} 2>&1"
 
 
 rule recovery_table:
@@ -142,6 +152,35 @@ rule recovery_table:
         "../envs/mgelens.yaml"
     shell:
         "mgelens recovery --table {input:q} --out {output:q} > {log:q} 2>&1"
+
+
+rule coverage:
+    input:
+        recovery_records,
+    output:
+        table="results/summary/coverage.csv",
+        rows="results/summary/coverage_lenses.csv",
+        targets="results/summary/coverage_targets.csv",
+        figure=report(
+            "results/summary/coverage.png",
+            caption="../report/coverage.rst",
+            category="Mocks",
+        ),
+    log:
+        "logs/coverage.log",
+    benchmark:
+        "results/summary/benchmarks/coverage.tsv"
+    params:
+        mgelens_version=command_version("coverage"),
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens coverage {input:q} --out {output.table:q} --rows {output.rows:q} "
+        "--targets {output.targets:q} --figure {output.figure:q} > {log:q} 2>&1"
 
 
 rule smoothness:

@@ -194,10 +194,14 @@ def preview_inputs(wildcards) -> dict:
 
 
 def simulate_recipe(wildcards) -> str:
-    """CLI arguments naming the mock of a lens: a paper mock or a population lens."""
+    """CLI arguments naming the mock of a lens: a paper mock, a population lens or an
+    independent (lenstronomy) mock."""
     recipe = lens_row(wildcards.lens)["mock"]
+    seed = f"--population-seed {config['population_seed']}"
     if recipe.startswith("P"):
-        return f"--population-index {int(recipe[1:])} --population-seed {config['population_seed']}"
+        return f"--population-index {int(recipe[1:])} {seed}"
+    if recipe.startswith("L"):
+        return f"--independent-index {int(recipe[1:])} {seed}"
     noise_seed = lens_row(wildcards.lens).get("noise_seed")
     if noise_seed is None or pd.isna(noise_seed):
         return f"--mock {recipe}"
@@ -320,12 +324,12 @@ def mock_study_fits(wildcards) -> str:
 def all_targets() -> list[str]:
     """Default target: previews and overview figures, the sample summary and its figures
     (which need every lens's SLaM chain, isophotes and quality record), and, if the sample
-    has mocks, the table of their recovered truth and, if one of them is M1, the
-    Appendix A smoothness scan."""
+    has mocks, the table of their recovered truth and their posterior coverage and, if
+    one of them is M1, the Appendix A smoothness scan."""
     targets = [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
     targets += [f"results/{lens}/figures/overview.png" for lens in LENSES.index]
     if (LENSES["kind"] == "mock").any():
-        targets.append("results/summary/recovery.csv")
+        targets += ["results/summary/recovery.csv", "results/summary/coverage.png"]
     if SMOOTHNESS_LENSES:
         targets.append("results/summary/smoothness.png")
     if PAPER_MOCK_FITS:

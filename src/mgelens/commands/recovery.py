@@ -14,7 +14,11 @@ each error as a fraction of the true lens light there: a lens-light error that t
 source error cancels is light the fit moved between the MGE and the source. The
 true-light refit scores the phase's maximum-likelihood model again with its lens light
 replaced by ``lens_light_blurred.fits`` (only the source re-solved): a negative Δ ln ε
-means the data prefer the fitted lens light to the true one. Prints
+means the data prefer the fitted lens light to the true one. With ``--isophotes`` (the
+table of ``mgelens isophotes --phase``), the fitted lens light's q, PA and a₄/a over
+0.5–2.5″ are scored against the same isophote analysis of ``lens_light_blurred.fits``
+about the true light centre (:mod:`mgelens.isophote_recovery`), and
+``--isophote-figure`` draws both profiles. Prints
 tables and writes the record as JSON; the exit code is 0 whether or not the criteria
 hold (they are in the JSON under ``criteria``).
 
@@ -29,13 +33,23 @@ import logging
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from astropy.io import fits
 
 from mgelens.atomic import atomic_path, write_json
 from mgelens.commands import add_threads_argument
 from mgelens.imaging import ImagingError, read_fits_image
+from mgelens.isophote_recovery import (
+    PROFILE_COLUMNS,
+    IsophoteRecovery,
+    isophote_recovery,
+    true_light_centre,
+)
+from mgelens.isophotes import TABLE_COLUMNS, isophote_table
 from mgelens.mask import circular
 from mgelens.pipeline.phases import MODEL_FILE, max_likelihood_problem
+from mgelens.plot import save_png
+from mgelens.plot.isophote_recovery import isophote_recovery_figure
 from mgelens.recovery import (
     lens_light_recovery,
     light_split_profile,
@@ -62,6 +76,15 @@ def register(subparsers) -> None:
     parser.add_argument("--lens-dir", type=Path, help="mock folder (truth.json)")
     parser.add_argument("--phase", type=Path, help="phase folder, e.g. results/M1/mass")
     parser.add_argument("--lens", help="lens name (default: the phase folder's parent)")
+    parser.add_argument(
+        "--isophotes",
+        type=Path,
+        help="isophote table of the phase's lens light (mgelens isophotes --phase); scores "
+        "it against the same analysis of lens_light_blurred.fits",
+    )
+    parser.add_argument(
+        "--isophote-figure", type=Path, help="with --isophotes: fitted against true isophotes (PNG)"
+    )
     parser.add_argument(
         "--table", type=Path, nargs="+", metavar="RECOVERY.json", help="records to gather"
     )
@@ -101,10 +124,13 @@ def run(args: argparse.Namespace) -> int:
         )  # fmt: skip
         problem, values = max_likelihood_problem(phase, args.lens_dir, args.phase.parent)
         refit = true_light_refit(problem.dataset, problem.model.build(values), true_light)
+        isophotes = None
+        if args.isophotes is not None:
+            isophotes = _isophote_recovery(args, lens, truth, true_light, pixel_scale)
     except (OSError, KeyError, ValueError, ImagingError) as exc:
         logger.error("recovery of %s: %s", lens, exc)
         return 1
-    record = recovery_summary(lens, mass, light, split, refit)
+    record = recovery_summary(lens, mass, light, split, refit, isophotes)
     write_json(args.out, record)
     print(f"{'parameter':22s} {'truth':>9s} {'median':>9s} {'3σ interval':>22s}  ok")
     for row in mass:
@@ -131,8 +157,40 @@ def run(args: argparse.Namespace) -> int:
         f"{refit.n_lens_light_intensities} non-zero lens-light intensities, "
         f"Δ ln ε = {refit.delta_log_evidence:+.1f} (< 0: the data prefer the fitted lens light)"
     )
+    if isophotes is not None:
+        _print_isophotes(isophotes)
     print("criteria:", ", ".join(f"{k} {v}" for k, v in record["criteria"].items()))
     return 0
+
+
+def _isophote_recovery(args, lens, truth, true_light, pixel_scale) -> IsophoteRecovery:
+    """Score ``args.isophotes`` against the isophotes of the true PSF-convolved lens light,
+    and draw the figure if asked."""
+    fitted = pd.read_csv(args.isophotes)
+    missing = sorted(set(TABLE_COLUMNS) - set(fitted.columns))
+    if missing:
+        raise ValueError(
+            f"{args.isophotes}: not an isophote table (no columns {', '.join(missing)}); "
+            "make it with mgelens isophotes --phase"
+        )
+    true = isophote_table(true_light, pixel_scale, centre=true_light_centre(truth))
+    result = isophote_recovery(fitted, true)
+    if args.isophote_figure is not None:
+        profile = pd.DataFrame(result.profile, columns=list(PROFILE_COLUMNS), dtype=float)
+        save_png(isophote_recovery_figure(fitted, true, profile, lens), args.isophote_figure)
+    return result
+
+
+def _print_isophotes(result: IsophoteRecovery) -> None:
+    def shown(value, digits):
+        return "n/a" if value is None else f"{value:.{digits}f}"
+
+    print(
+        f"isophotes over 0.5–2.5″ ({result.n_compared} of {result.n_radii} radii compared): "
+        f"max |Δq| {shown(result.max_abs_axis_ratio_error, 3)}, "
+        f"max |ΔPA| {shown(result.max_abs_angle_error, 2)}°, "
+        f"max |Δa4/a| {shown(result.max_abs_a4_error, 4)}"
+    )
 
 
 def _gather(paths: list[Path], out: Path) -> int:

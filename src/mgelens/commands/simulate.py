@@ -5,7 +5,12 @@ Examples::
     mgelens simulate --mock M1 --out results/M1/mock
     mgelens simulate --mock M2 --noise-seed 11 --name M2n11 --out results/M2n11/mock
     mgelens simulate --population-index 7 --population-seed 2024 --out results/P07/mock
+    mgelens simulate --independent-index 3 --image-size 201 --out results/L03/mock
     mgelens simulate --mock M3 --source-image ngc3690.fits --source-pixel-scale 0.004 --out m3
+
+Independent mocks (:mod:`mgelens.independent_mock`) have their images formed by
+lenstronomy, in the same layout and truth conventions; they need the ``independent``
+extra.
 
 The folder receives ``data.fits``, ``noise_map.fits``, ``psf.fits`` (the layout of the real
 SLACS folders), the noise-free truth images and ``truth.json``
@@ -19,6 +24,12 @@ import time
 
 from mgelens import simulate
 from mgelens.commands import add_threads_argument
+from mgelens.independent_mock import (
+    IndependentLens,
+    MissingDependency,
+    independent_lens,
+    simulate_independent,
+)
 from mgelens.threads import limit_threads
 
 logger = logging.getLogger("mgelens.simulate")
@@ -27,7 +38,7 @@ logger = logging.getLogger("mgelens.simulate")
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "simulate",
-        help="simulate a mock lens (paper mock M1-M3 or a population lens)",
+        help="simulate a mock lens (paper mock M1-M3, a population lens or an independent mock)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -37,6 +48,12 @@ def register(subparsers) -> None:
     )
     recipe.add_argument(
         "--population-index", type=int, metavar="I", help="lens I of the mock population"
+    )
+    recipe.add_argument(
+        "--independent-index",
+        type=int,
+        metavar="I",
+        help="independent mock I, its images formed by lenstronomy (extra 'independent')",
     )
     parser.add_argument(
         "--population-seed",
@@ -88,8 +105,12 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def build_lens(args: argparse.Namespace) -> simulate.MockLens:
-    """The :class:`~mgelens.simulate.MockLens` described by the parsed arguments."""
+def build_lens(args: argparse.Namespace) -> simulate.MockLens | IndependentLens:
+    """The mock lens described by the parsed arguments: a
+    :class:`~mgelens.simulate.MockLens` or an independent mock's
+    :class:`~mgelens.independent_mock.IndependentLens`."""
+    if args.independent_index is not None:
+        return _independent_lens(args)
     if args.mock is not None:
         lens = simulate.paper_mock(args.mock, seed=args.seed, noise_seed=args.noise_seed)
     else:
@@ -112,15 +133,33 @@ def build_lens(args: argparse.Namespace) -> simulate.MockLens:
     return lens
 
 
+def _independent_lens(args: argparse.Namespace) -> IndependentLens:
+    for option, value in (
+        ("--seed", args.seed),
+        ("--noise-seed", args.noise_seed),
+        ("--source-image", args.source_image),
+    ):
+        if value is not None:
+            raise ValueError(
+                f"{option} does not apply to independent mocks; they derive everything from "
+                "--population-seed and --independent-index"
+            )
+    lens = independent_lens(args.independent_index, args.population_seed)
+    return dataclasses.replace(lens, name=args.name) if args.name else lens
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         limit_threads(args.threads)
         observation = simulate.Observation(image_size=args.image_size, sub_size=args.sub_size)
         lens = build_lens(args)
         start = time.perf_counter()
-        mock = simulate.simulate(lens, observation)
+        if isinstance(lens, IndependentLens):
+            mock = simulate_independent(lens, observation)
+        else:
+            mock = simulate.simulate(lens, observation)
         folder = simulate.write_mock(mock, args.out)
-    except (ValueError, OSError) as error:
+    except (ValueError, OSError, MissingDependency) as error:
         logger.error("%s", error)
         return 1
     logger.info(

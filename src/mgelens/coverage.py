@@ -1,0 +1,201 @@
+"""Coverage of the mass posteriors over a set of truth-known mocks: how often the credible
+intervals hold the truth, the bias and scatter of the medians, and the project's targets.
+
+The input is one recovery record per mock (:func:`mgelens.recovery.recovery_summary`,
+``results/<lens>/recovery.json``). Per parameter:
+
+* ``within_1sigma``, ``within_3sigma``: fraction of mocks whose central 68.27 % and
+  99.73 % credible intervals hold the truth (angles modulo 180°);
+* ``bias``: mean of median − truth; ``scatter``: its standard deviation (ddof 1);
+* ``median_abs_pull``: median of |pull|, the pull being (median − truth) over the 1σ
+  half-width on the side of the truth (median − lower if the median lies above the
+  truth, upper − median otherwise). For calibrated Gaussian posteriors the pulls are
+  N(0, 1) and the median |pull| is 0.674.
+
+Targets (:data:`TARGETS`): ≥ 95 % of the true γ, θ_E and shear components inside their
+3σ intervals; |median γ − truth| < 0.05 for ≥ 90 % of the mocks; θ_E within 1 % for
+≥ 95 %.
+"""
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+PARAMETERS = (
+    "mass.centre_x",
+    "mass.centre_y",
+    "mass.einstein_radius",
+    "mass.axis_ratio",
+    "mass.angle",
+    "mass.slope",
+    "shear.gamma_1",
+    "shear.gamma_2",
+)
+"""Parameters in the order of the tables and the figure."""
+
+ROW_COLUMNS = (
+    "lens",
+    "parameter",
+    "truth",
+    "median",
+    "error",
+    "lower_1sigma",
+    "upper_1sigma",
+    "lower_3sigma",
+    "upper_3sigma",
+    "within_1sigma",
+    "within_3sigma",
+    "pull",
+)
+"""Columns of :func:`coverage_rows`, one row per mock and parameter."""
+
+TABLE_COLUMNS = (
+    "parameter",
+    "n",
+    "within_1sigma",
+    "within_3sigma",
+    "bias",
+    "scatter",
+    "median_abs_pull",
+)
+"""Columns of :func:`coverage_table`, one row per parameter."""
+
+
+@dataclass(frozen=True)
+class Target:
+    """A fraction of mocks that must meet a condition: ``goal`` ≤ fraction."""
+
+    name: str
+    parameter: str
+    condition: str
+    """``within_3sigma``, ``abs_error`` (|median − truth| < ``limit``) or
+    ``relative_error`` (|median − truth|/truth < ``limit``)."""
+    goal: float
+    limit: float | None = None
+
+
+TARGETS = (
+    Target("γ inside 3σ", "mass.slope", "within_3sigma", 0.95),
+    Target("θ_E inside 3σ", "mass.einstein_radius", "within_3sigma", 0.95),
+    Target("γ₁ inside 3σ", "shear.gamma_1", "within_3sigma", 0.95),
+    Target("γ₂ inside 3σ", "shear.gamma_2", "within_3sigma", 0.95),
+    Target("|median γ − truth| < 0.05", "mass.slope", "abs_error", 0.90, 0.05),
+    Target("θ_E within 1 %", "mass.einstein_radius", "relative_error", 0.95, 0.01),
+)
+
+
+def _pull(error: float, median: float, lower: float, upper: float) -> float:
+    width = median - lower if error > 0 else upper - median
+    return error / width if width > 0 else np.nan
+
+
+def coverage_rows(records: Sequence[Mapping]) -> pd.DataFrame:
+    """One row per mock and mass parameter of the records (columns :data:`ROW_COLUMNS`).
+
+    Records written before the 1σ intervals were recorded give NaN there (and in the
+    pull) and ``within_1sigma`` None.
+    """
+    rows = []
+    for record in records:
+        for entry in record["mass"]:
+            if entry["name"] not in PARAMETERS:
+                continue
+            lower_1 = entry.get("lower_1sigma", np.nan)
+            upper_1 = entry.get("upper_1sigma", np.nan)
+            rows.append(
+                {
+                    "lens": record["lens"],
+                    "parameter": entry["name"],
+                    "truth": entry["truth"],
+                    "median": entry["median"],
+                    "error": entry["error"],
+                    "lower_1sigma": lower_1,
+                    "upper_1sigma": upper_1,
+                    "lower_3sigma": entry["lower_3sigma"],
+                    "upper_3sigma": entry["upper_3sigma"],
+                    "within_1sigma": entry.get("within_1sigma"),
+                    "within_3sigma": entry["within_3sigma"],
+                    "pull": _pull(entry["error"], entry["median"], lower_1, upper_1),
+                }
+            )
+    return pd.DataFrame(rows, columns=list(ROW_COLUMNS))
+
+
+def _fraction(values: pd.Series) -> float:
+    known = values.dropna()
+    return float(known.astype(bool).mean()) if len(known) else np.nan
+
+
+def coverage_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per parameter (columns :data:`TABLE_COLUMNS`) over the rows of :func:`coverage_rows`;
+    parameters without rows are left out."""
+    table = []
+    for name in PARAMETERS:
+        part = rows[rows["parameter"] == name]
+        if part.empty:
+            continue
+        errors = part["error"].to_numpy(dtype=float)
+        pulls = np.abs(part["pull"].to_numpy(dtype=float))
+        table.append(
+            {
+                "parameter": name,
+                "n": len(part),
+                "within_1sigma": _fraction(part["within_1sigma"]),
+                "within_3sigma": _fraction(part["within_3sigma"]),
+                "bias": float(errors.mean()),
+                "scatter": float(errors.std(ddof=1)) if errors.size > 1 else np.nan,
+                "median_abs_pull": float(np.nanmedian(pulls))
+                if np.isfinite(pulls).any()
+                else np.nan,
+            }
+        )
+    return pd.DataFrame(table, columns=list(TABLE_COLUMNS))
+
+
+def target_table(rows: pd.DataFrame, targets: Sequence[Target] = TARGETS) -> pd.DataFrame:
+    """Each target's measured fraction, goal and whether it is met (``met`` is False with
+    no mocks). Columns ``target, parameter, n, fraction, goal, met``."""
+    out = []
+    for target in targets:
+        part = rows[rows["parameter"] == target.parameter]
+        if target.condition == "within_3sigma":
+            passed = part["within_3sigma"].astype(bool)
+        elif target.condition == "abs_error":
+            passed = part["error"].abs() < target.limit
+        elif target.condition == "relative_error":
+            passed = (part["error"] / part["truth"]).abs() < target.limit
+        else:
+            raise ValueError(f"unknown target condition {target.condition!r}")
+        fraction = float(passed.mean()) if len(part) else np.nan
+        out.append(
+            {
+                "target": target.name,
+                "parameter": target.parameter,
+                "n": len(part),
+                "fraction": fraction,
+                "goal": target.goal,
+                "met": bool(len(part)) and fraction >= target.goal,
+            }
+        )
+    return pd.DataFrame(out)
+
+
+CHAIN_BENCHMARKS = ("sp", "spix1", "spix2", "light", "mass")
+"""Benchmark files (``results/<lens>/benchmarks/<phase>*.tsv``) whose wall-clock seconds
+make up a lens's chain: the five phases and every LIGHT candidate."""
+
+
+def chain_seconds(benchmark_folder) -> float:
+    """Wall-clock seconds of a lens's SLaM chain: the sum of the ``s`` column of its phase
+    benchmark files (Snakemake ``benchmark:``); NaN if there are none."""
+    files = [
+        path
+        for path in sorted(Path(benchmark_folder).glob("*.tsv"))
+        if path.stem.split("_")[0] in CHAIN_BENCHMARKS
+    ]
+    if not files:
+        return np.nan
+    return float(sum(pd.read_csv(path, sep="\t")["s"].sum() for path in files))

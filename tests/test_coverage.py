@@ -1,0 +1,172 @@
+"""Posterior coverage over truth-known mocks (mgelens.coverage): fractions, pulls and
+targets on records with known answers, and the command's files."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mgelens.cli import main
+from mgelens.coverage import (
+    TARGETS,
+    chain_seconds,
+    coverage_rows,
+    coverage_table,
+    target_table,
+)
+from mgelens.plot.coverage import coverage_figure
+
+
+def entry(name, truth, median, one, three):
+    """A recovery record's mass row with symmetric 1σ and 3σ half-widths."""
+    return {
+        "name": name,
+        "truth": truth,
+        "median": median,
+        "error": median - truth,
+        "lower_1sigma": median - one,
+        "upper_1sigma": median + one,
+        "within_1sigma": abs(median - truth) <= one,
+        "lower_3sigma": median - three,
+        "upper_3sigma": median + three,
+        "within_3sigma": abs(median - truth) <= three,
+    }
+
+
+def records(slope_errors, theta_errors=None) -> list[dict]:
+    """Mocks with γ = 2.0 + error (σ 0.02) and θ_E = 1.2 (1 + relative error) (σ 0.005)."""
+    theta_errors = [0.0] * len(slope_errors) if theta_errors is None else theta_errors
+    return [
+        {
+            "lens": f"P{k:02d}",
+            "mass": [
+                entry("mass.slope", 2.0, 2.0 + e, 0.02, 0.06),
+                entry("mass.einstein_radius", 1.2, 1.2 * (1.0 + t), 0.005, 0.015),
+                entry("shear.gamma_1", 0.03, 0.03, 0.01, 0.03),
+                entry("shear.gamma_2", -0.01, -0.01, 0.01, 0.03),
+            ],
+        }
+        for k, (e, t) in enumerate(zip(slope_errors, theta_errors, strict=True))
+    ]
+
+
+def test_fractions_bias_scatter_and_pulls_of_known_errors():
+    errors = [0.01, -0.03, 0.05, 0.3]  # pulls 0.5, -1.5, 2.5, 15
+    rows = coverage_rows(records(errors))
+    slope = rows[rows["parameter"] == "mass.slope"]
+    assert slope["pull"].to_numpy() == pytest.approx([0.5, -1.5, 2.5, 15.0])
+    table = coverage_table(rows).set_index("parameter")
+    assert table.loc["mass.slope", "n"] == 4
+    assert table.loc["mass.slope", "within_1sigma"] == pytest.approx(0.25)
+    assert table.loc["mass.slope", "within_3sigma"] == pytest.approx(0.75)
+    assert table.loc["mass.slope", "bias"] == pytest.approx(np.mean(errors))
+    assert table.loc["mass.slope", "scatter"] == pytest.approx(np.std(errors, ddof=1))
+    assert table.loc["mass.slope", "median_abs_pull"] == pytest.approx(2.0)
+    assert list(table.index) == [
+        "mass.einstein_radius",
+        "mass.slope",
+        "shear.gamma_1",
+        "shear.gamma_2",
+    ]
+
+
+def test_pull_uses_the_half_width_on_the_side_of_the_truth():
+    record = {
+        "lens": "A",
+        "mass": [
+            {
+                "name": "mass.slope",
+                "truth": 2.0,
+                "median": 2.1,
+                "error": 0.1,
+                "lower_1sigma": 2.05,
+                "upper_1sigma": 2.3,
+                "within_1sigma": False,
+                "lower_3sigma": 1.9,
+                "upper_3sigma": 2.5,
+                "within_3sigma": True,
+            }
+        ],
+    }
+    assert coverage_rows([record])["pull"].iloc[0] == pytest.approx(2.0)  # 0.1 / (2.1 - 2.05)
+    below = json.loads(json.dumps(record))
+    below["mass"][0].update(truth=2.2, error=-0.1)
+    assert coverage_rows([below])["pull"].iloc[0] == pytest.approx(-0.5)  # -0.1 / 0.2
+
+
+def test_targets_pass_and_fail_at_their_thresholds():
+    good = records([0.0] * 19 + [0.04], [0.0] * 19 + [0.005])
+    met = target_table(coverage_rows(good)).set_index("target")
+    assert met["met"].all()
+    assert len(met) == len(TARGETS)
+    bad = records([0.0] * 17 + [0.1, 0.2, 0.3], [0.0] * 18 + [0.02, 0.03])
+    missed = target_table(coverage_rows(bad)).set_index("target")
+    assert not missed.loc["γ inside 3σ", "met"]  # 17/20 = 85 %
+    assert missed.loc["γ inside 3σ", "fraction"] == pytest.approx(0.85)
+    assert not missed.loc["|median γ − truth| < 0.05", "met"]  # 85 % < 90 %
+    assert not missed.loc["θ_E within 1 %", "met"]  # 90 % < 95 %
+    assert missed.loc["γ₁ inside 3σ", "met"]
+    empty = target_table(coverage_rows([]))
+    assert not empty["met"].any()
+
+
+def test_records_without_one_sigma_intervals_leave_them_unknown():
+    old = records([0.01])
+    for row in old[0]["mass"]:
+        for key in ("lower_1sigma", "upper_1sigma", "within_1sigma"):
+            del row[key]
+    table = coverage_table(coverage_rows(old)).set_index("parameter")
+    assert np.isnan(table.loc["mass.slope", "within_1sigma"])
+    assert table.loc["mass.slope", "within_3sigma"] == 1.0
+
+
+def test_chain_seconds_sums_the_phase_benchmarks(tmp_path):
+    for name, seconds in (
+        ("sp", 100.0),
+        ("spix1", 20.0),
+        ("spix2", 30.0),
+        ("light_x2_point", 5.0),
+        ("mass", 45.0),
+        ("simulate_mock", 999.0),
+        ("choose_light", 999.0),
+    ):
+        (tmp_path / f"{name}.tsv").write_text(f"s\th:m:s\n{seconds}\t0:00:00\n")
+    assert chain_seconds(tmp_path) == pytest.approx(200.0)
+    assert np.isnan(chain_seconds(tmp_path / "none"))
+
+
+def test_command_writes_the_tables_and_the_figure(tmp_path):
+    paths = []
+    for record in records([0.01, -0.03, 0.3]):
+        folder = tmp_path / record["lens"]
+        (folder / "benchmarks").mkdir(parents=True)
+        (folder / "benchmarks" / "sp.tsv").write_text("s\n600\n")
+        (folder / "recovery.json").write_text(json.dumps(record))
+        paths.append(str(folder / "recovery.json"))
+    out = tmp_path / "summary"
+    code = main(
+        [
+            "coverage",
+            *paths,
+            "--out",
+            str(out / "coverage.csv"),
+            "--rows",
+            str(out / "rows.csv"),
+            "--targets",
+            str(out / "targets.csv"),
+            "--figure",
+            str(out / "coverage.png"),
+        ]
+    )
+    assert code == 0
+    table = pd.read_csv(out / "coverage.csv")
+    assert table.set_index("parameter").loc["mass.slope", "within_3sigma"] == pytest.approx(2 / 3)
+    rows = pd.read_csv(out / "rows.csv")
+    assert (rows["chain_seconds"] == 600.0).all()
+    assert (
+        not pd.read_csv(out / "targets.csv").set_index("parameter").loc["mass.slope", "met"].all()
+    )
+    assert (out / "coverage.png").stat().st_size > 20_000
+    figure = coverage_figure(rows, target_table(rows))
+    assert "median chain 10 min" in figure.texts[0].get_text()
