@@ -364,9 +364,14 @@ def test_fit_settings_reach_the_fit(mock_dir):
         assert dataset.settings.edge_rule == rule
 
 
-def test_sersic_lens_light_solves_unconstrained_unless_told_otherwise():
+def test_sersic_lens_light_needs_its_solve_stated():
+    """No setting silently changes another: 3×Sérsic without positive_only is refused
+    (the default, true, is the MGE's; the paper's Sérsic runs were unconstrained)."""
     assert settings_from_mapping({}).positive_only
-    assert not settings_from_mapping({"lens_light_model": "sersic"}).positive_only
+    with pytest.raises(SettingsError, match=r"sersic needs slam\.positive_only"):
+        settings_from_mapping({"lens_light_model": "sersic"}, origin="run.yaml")
+    unconstrained = {"lens_light_model": "sersic", "positive_only": False}
+    assert not settings_from_mapping(unconstrained).positive_only
     explicit = {"lens_light_model": "sersic", "positive_only": True}
     assert settings_from_mapping(explicit).positive_only
     assert not settings_from_mapping({"positive_only": False}).positive_only
@@ -661,12 +666,13 @@ def test_interrupted_phase_resumes_to_the_uninterrupted_result(sp_run, mock_dir,
 # -- isophotes of a phase's lens light --------------------------------------------------
 def test_isophotes_of_a_phase_render_its_lens_light(sp_run, mock_dir, tmp_path):
     """``mgelens isophotes --phase`` renders the phase's MGE lens light, PSF-convolved, on a
-    ±3.5″ grid: inside the mask it equals the fit's own lens-light image in model.fits;
-    the summary carries the phase's mass."""
+    ±3.5″ grid at the imaging's pixel scale (here 0.1″, read from model.fits): inside
+    the mask it equals the fit's own lens-light image in model.fits; the summary carries
+    the phase's mass."""
     folder = sp_run[0] / "sp"
     image_path, summary_path = tmp_path / "lens_light.fits", tmp_path / "isophotes.json"
     arguments = ["isophotes", "--phase", str(folder), "--psf", str(mock_dir / "psf.fits")]
-    arguments += ["--pixel-scale", str(PIXEL), "--save-image", str(image_path)]
+    arguments += ["--save-image", str(image_path)]
     arguments += ["--summary", str(summary_path), "--out", str(tmp_path / "isophotes.csv")]
     assert main(arguments) == 0
     rendered = fits.getdata(image_path).astype(float)
@@ -705,6 +711,15 @@ def test_isophotes_of_a_phase_need_the_psf(sp_run, tmp_path, caplog):
     folder = sp_run[0] / "sp"
     assert main(["isophotes", "--phase", str(folder), "--out", str(tmp_path / "t.csv")]) == 1
     assert "--phase needs --psf" in caplog.text
+
+
+def test_isophotes_of_a_phase_take_the_imaging_pixel_scale(sp_run, mock_dir, tmp_path, caplog):
+    """The PSF is sampled on the imaging's pixels, so another render scale is refused."""
+    arguments = ["isophotes", "--phase", str(sp_run[0] / "sp"), "--psf",
+                 str(mock_dir / "psf.fits"), "--pixel-scale", "0.05", "--out",
+                 str(tmp_path / "t.csv")]  # fmt: skip
+    assert main(arguments) == 1
+    assert "--pixel-scale does not apply with --phase" in caplog.text
 
 
 # -- the 3×Sérsic chain -------------------------------------------------------------------
@@ -837,7 +852,7 @@ def test_sersic_and_mge_results_do_not_mix(sersic_run, mock_dir):
 def test_isophotes_of_a_sersic_phase(sersic_run, mock_dir, tmp_path):
     folder = sersic_run / "mass"
     arguments = ["isophotes", "--phase", str(folder), "--psf", str(mock_dir / "psf.fits")]
-    arguments += ["--pixel-scale", str(PIXEL), "--summary", str(tmp_path / "summary.json")]
+    arguments += ["--summary", str(tmp_path / "summary.json")]
     assert main([*arguments, "--out", str(tmp_path / "isophotes.csv")]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     epl = phases.mass_model(folder)[0]

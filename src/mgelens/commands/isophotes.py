@@ -12,8 +12,9 @@ it first (for an unconvolved model image). Coordinates follow SPEC §1.1: (x, y)
 
 With ``--phase`` instead of an image, the lens light is the maximum-likelihood lens light
 (MGE or Sérsics) of a SLaM phase folder (SPEC §9: the final L/M-phase model), rendered on a
-±3.5″ grid at the ``--pixel-scale`` (default 0.05″) with the fits' over-sampling and
-convolved with ``--psf`` (required); the centre is the first component's centre, and the
+±3.5″ grid at its imaging's pixel scale (``PIXSCALE`` of the phase's ``model.fits``, the
+grid the PSF is sampled on) with the fits' over-sampling and convolved with ``--psf``
+(required); the centre is the first component's centre, and the
 phase's mass model (q, φ with 3σ intervals, critical curve, Einstein radius, SPEC §9.3)
 joins the summary and figure::
 
@@ -53,9 +54,6 @@ from mgelens.search.results import PhaseResult
 from mgelens.summary import lens_summary
 from mgelens.threads import limit_threads
 
-DEFAULT_PIXEL_SCALE = 0.05
-"""Arcsec per pixel of the rendered phase lens light (SPEC §9: Δ = 0.05″)."""
-
 logger = logging.getLogger(__name__)
 
 
@@ -72,7 +70,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--pixel-scale",
         type=float,
-        help="arcsec per pixel (default: the image's PIXSCALE keyword; 0.05 with --phase)",
+        help="arcsec per pixel of the image (default: its PIXSCALE keyword; not with --phase)",
     )
     parser.add_argument(
         "--centre",
@@ -174,13 +172,21 @@ def _phase_light(args: argparse.Namespace):
     """(image, centre, MassShape) of the lens light of the phase folder ``args.phase``."""
     if args.psf is None:
         raise ValueError("--phase needs --psf: the PSF of the lens's imaging (psf.fits)")
-    scale = DEFAULT_PIXEL_SCALE if args.pixel_scale is None else args.pixel_scale
-    args.pixel_scale = check_positive(scale, "--pixel-scale (arcsec/pixel)")
+    if args.pixel_scale is not None:
+        raise ValueError(
+            "--pixel-scale does not apply with --phase: the lens light is rendered at its "
+            "imaging's pixel scale (PIXSCALE of the phase's model.fits), on which the PSF "
+            "is sampled"
+        )
+    lens_header = fits.getheader(args.phase / MODEL_FILE, extname="LENS")
+    if PIXSCALE_KEY not in lens_header:
+        raise ValueError(f"{args.phase / MODEL_FILE}: extension LENS has no {PIXSCALE_KEY}")
+    args.pixel_scale = check_positive(lens_header[PIXSCALE_KEY], f"{MODEL_FILE} {PIXSCALE_KEY}")
     profiles = lens_light_profiles(args.phase)
     centre = profiles[0].centre
     image = render_light(profiles, args.pixel_scale, psf=read_psf(args.psf), centre=centre)
     if args.save_image is not None:
-        unit = fits.getheader(args.phase / MODEL_FILE, extname="LENS").get("BUNIT", "")
+        unit = lens_header.get("BUNIT", "")
         header = fits.Header({PIXSCALE_KEY: args.pixel_scale, "BUNIT": unit})
         header["PHASE"] = str(args.phase)[-68:]
         write_fits(args.save_image, fits.PrimaryHDU(image.astype(np.float32), header))

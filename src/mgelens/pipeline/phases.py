@@ -39,7 +39,6 @@ import contextlib
 import dataclasses
 import functools
 import hashlib
-import importlib.util
 import json
 import logging
 from collections.abc import Iterator
@@ -343,20 +342,10 @@ def reference_passive_set(problem: PhaseProblem) -> np.ndarray | None:
 
 
 def sampler_for(settings: SamplerSettings, n_free: int) -> SamplerSettings:
-    """``settings`` made runnable for ``n_free`` free parameters.
-
-    Nautilus is replaced by dynesty_static if it is not installed, and dynesty's live
-    points are raised to 2 n_free + 2 if fewer (dynesty calls n_live ≤ 2 n_dim "extremely
-    risky"; e.g. the quick profile's LIGHT phase with 6 sets and a point set). Both are
-    logged.
+    """``settings`` made runnable for ``n_free`` free parameters: dynesty's live points
+    are raised to 2 n_free + 2 if fewer (dynesty calls n_live ≤ 2 n_dim "extremely
+    risky"; e.g. the quick profile's LIGHT phase with 6 sets and a point set), logged.
     """
-    if settings.method == "nautilus" and importlib.util.find_spec("nautilus") is None:
-        logger.warning(
-            "nautilus is not installed (pip install nautilus-sampler): using dynesty_static "
-            "with n_live = %d instead",
-            settings.n_live,
-        )
-        settings = dataclasses.replace(settings, method="dynesty_static")
     minimum = 2 * n_free + 2
     if settings.method != "nautilus" and settings.n_live < minimum:
         logger.warning(

@@ -87,9 +87,9 @@ class SlamSettings:
         (SPEC §8.1): 2 Sérsics with a shared centre in SP, fixed entirely (intensities
         too) in SPix1 and SPix2, 3 Sérsics in LIGHT, fitted together with the EPL in MASS.
         All Sérsic intensities are solved linearly. The paper's Sérsic runs did not
-        constrain the source positive: a settings mapping (YAML ``slam:`` section or
-        ``--slam``) that sets ``lens_light_model: sersic`` without ``positive_only``
-        gets ``positive_only: false`` (:func:`settings_from_mapping`).
+        constrain the source positive, unlike its MGE runs, so a settings mapping (YAML
+        ``slam:`` section or ``--slam``) that sets ``lens_light_model: sersic`` must set
+        ``positive_only`` too (:func:`settings_from_mapping` refuses it otherwise).
     mge_sets : {2, 4, 6}
         Extended 30-Gaussian sets of the LIGHT phase (SP always uses 2).
     point_set : bool
@@ -158,9 +158,7 @@ class SlamSettings:
         phase stops with a message naming the file (:func:`mgelens.pipeline.phases.read_phase`);
         on, for smoke tests of the plumbing.
     samplers : mapping of phase name to SamplerSettings
-        The non-linear search of each phase. ``method="nautilus"`` falls back to
-        ``dynesty_static`` with the same live points if nautilus is not installed (it is a
-        dependency of mgelens; the fallback serves environments built without it).
+        The non-linear search of each phase.
     """
 
     profile: str = "quick"
@@ -374,8 +372,12 @@ def settings_from_mapping(
         For an unknown key (named with its ``slam.`` path) or an invalid value.
     """
     content = dict(content)
-    if content.get("lens_light_model") == "sersic":
-        content.setdefault("positive_only", False)  # the paper's 3×Sérsic runs (SPEC §8.1)
+    if content.get("lens_light_model") == "sersic" and "positive_only" not in content:
+        raise SettingsError(
+            f"{origin}: slam.lens_light_model: sersic needs slam.positive_only set too: false "
+            "for the paper's unconstrained 3×Sérsic solve (SPEC §8.1), true for non-negative "
+            "intensities; the default (true) is the MGE's"
+        )
     profile = profile or content.pop("profile", None) or DEFAULT_PROFILE
     content.pop("profile", None)
     if profile not in PROFILES:

@@ -1,8 +1,7 @@
 """Nested sampling of a :class:`~mgelens.search.model.ParameterSpace` (SPEC §8.3, §8.4).
 
 :func:`run_nested` wraps dynesty's static (``NestedSampler``) and dynamic
-(``DynamicNestedSampler``) samplers, and nautilus when it is installed
-(``pip install nautilus-sampler``; optional). It adds what long fits on clusters need:
+(``DynamicNestedSampler``) samplers, and nautilus. It adds what long fits on clusters need:
 
 * **Reproducibility**: a fixed seed (``rstate=np.random.default_rng(seed)`` for dynesty,
   ``seed=`` for nautilus).
@@ -18,8 +17,7 @@
   continuing a different fit. The checkpoint is **kept** after a
   successful run: calling :func:`run_nested` again returns the stored run without sampling.
   Callers delete it once their result files are written if they want the space back.
-  Nautilus checkpoints to ``<checkpoint stem>.h5`` (HDF5, no code) when ``h5py`` is
-  importable, with the same sidecar.
+  Nautilus checkpoints to ``<checkpoint stem>.h5`` (HDF5, no code), with the same sidecar.
 * **Quiet progress**: no progress bar; one line every ``progress_every`` seconds through
   ``log`` (default: the ``mgelens.search`` logger at INFO level).
 * **Parallel likelihoods**: ``n_processes > 1`` runs a ``multiprocessing`` pool ("spawn"
@@ -849,15 +847,9 @@ def _sample_dynesty(
 
 
 # -- nautilus ------------------------------------------------------------------------------
-def _nautilus_checkpoint(checkpoint_path: Path | None, log) -> Path | None:
-    if checkpoint_path is None:
-        return None
-    try:
-        import h5py  # noqa: F401  (nautilus needs it to write checkpoints)
-    except ImportError:
-        log("nautilus: h5py is not installed, running without a checkpoint")
-        return None
-    return checkpoint_path.with_suffix(".h5")
+def _nautilus_checkpoint(checkpoint_path: Path | None) -> Path | None:
+    """Nautilus's HDF5 checkpoint beside ``checkpoint_path`` (written through h5py)."""
+    return None if checkpoint_path is None else checkpoint_path.with_suffix(".h5")
 
 
 NAUTILUS_MIN_PROGRESS_INTERVAL = 1.0
@@ -880,15 +872,10 @@ def _sample_nautilus(
     seed: int,
     log: Callable[[str], None],
 ) -> SamplerOutput:
-    try:
-        import nautilus
-    except ImportError as error:
-        raise ImportError(
-            "method='nautilus' needs the optional package nautilus-sampler "
-            "(pip install nautilus-sampler)"
-        ) from error
+    import nautilus  # imported here: it loads its neural-network stack on import
+
     space = evaluation.space
-    filepath = _nautilus_checkpoint(checkpoint_path, log)
+    filepath = _nautilus_checkpoint(checkpoint_path)
     if filepath is not None:
         fingerprint = _fingerprint(space, settings, seed)
         if filepath.exists():
