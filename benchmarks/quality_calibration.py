@@ -25,7 +25,7 @@ import time
 import numpy as np
 from matplotlib.figure import Figure
 
-from mgelens import quality, simulate
+from mgelens import mock_lenses, mock_light, quality, simulate
 from mgelens.convolve import convolve_image
 from mgelens.grid import pixel_centres
 from mgelens.mask import circular
@@ -75,7 +75,7 @@ def noise_trials(geo, sigma_pixels, trials, rng):
 
 def outer_light(lens, mock, pixel_scale, minimum_sigma=0.5):
     """PSF-convolved image of the M1 Gaussians with major-axis σ ≥ ``minimum_sigma``."""
-    outer = simulate.MGELight(
+    outer = mock_light.MGELight(
         tuple(g for g in lens.light.gaussians if g.sigma / g.axis_ratio >= minimum_sigma)
     )
     x, y = pixel_centres(mock.imaging.data.shape, pixel_scale)
@@ -104,7 +104,7 @@ def main() -> None:
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     observation = simulate.Observation(sub_size=4, source_plane_size=41)
-    lenses = {name: simulate.paper_mock(name) for name in ("M1", "M3")}
+    lenses = {name: mock_lenses.paper_mock(name) for name in ("M1", "M3")}
     mocks = {name: simulate.simulate(lens, observation) for name, lens in lenses.items()}
     geometries = {"M3 2.2″": geometry(mocks["M3"], 2.2), "M1 3.0″": geometry(mocks["M1"], 3.0)}
     figure = Figure(figsize=(12.0, 7.0), layout="constrained")

@@ -16,7 +16,7 @@ LAYERS = (
     ("fit", ("fit",)),
     ("search", ("search",)),
     ("pipeline", ("pipeline",)),
-    ("analysis", ("simulate", "independent_mock", "isophotes", "isophote_recovery", "recovery",
+    ("analysis", ("simulate", "mock_light", "mock_sources", "mock_lenses", "independent_mock", "isophotes", "isophote_recovery", "recovery",
                   "coverage", "quality", "overview", "summary", "published", "mock_study",
                   "smoothness")),
     ("plot", ("plot",)),

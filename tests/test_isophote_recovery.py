@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mgelens import simulate
+from mgelens import mock_lenses, mock_light, simulate
 from mgelens.convolve import convolve_image
 from mgelens.isophote_recovery import (
     COMPARISON_RADII,
@@ -41,7 +41,7 @@ def table(sma, q, pa, a4) -> pd.DataFrame:
     )
 
 
-def analytic_table(light: simulate.IsophoteLight) -> pd.DataFrame:
+def analytic_table(light: mock_light.IsophoteLight) -> pd.DataFrame:
     """truth.json's isophote table of a population mock as an isophote table."""
     truth = light.isophote_table()
     return table(truth["sma"], truth["axis_ratio"], truth["angle"], truth["a4_over_a"])
@@ -53,9 +53,9 @@ def light_image(light, psf=True) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def population_light() -> simulate.IsophoteLight:
+def population_light() -> mock_light.IsophoteLight:
     """Population lens 1: q 0.83 → 0.73 and a 16° twist over 0.5–2.5″, boxy a₄/a −0.013."""
-    return simulate.population_lens(1).light
+    return mock_lenses.population_lens(1).light
 
 
 @pytest.fixture(scope="module")
@@ -176,7 +176,7 @@ def test_the_record_and_table_carry_the_isophote_scores(measured_truth):
 
 
 def test_true_light_centre_of_paper_and_population_truths(population_light):
-    m1 = simulate.simulate(simulate.paper_mock("M1"), simulate.Observation(image_size=31)).truth
+    m1 = simulate.simulate(mock_lenses.paper_mock("M1"), simulate.Observation(image_size=31)).truth
     assert true_light_centre(m1) == (0.013, -0.07)
     assert true_light_centre({"lens_light": population_light.to_dict()}) == pytest.approx(
         population_light.centre

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 from astropy.io import fits
 
-from mgelens import simulate
+from mgelens import mock_lenses, simulate
 from mgelens.cli import main
 from mgelens.fit import MGESource, fit
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
@@ -472,7 +472,7 @@ def small_mock() -> tuple[np.ndarray, np.ndarray, Imaging]:
         source_plane_size=41,
         source_plane_pixel_scale=0.05,
     )
-    mock = simulate.simulate(simulate.paper_mock("M1"), observation)
+    mock = simulate.simulate(mock_lenses.paper_mock("M1"), observation)
     rng = np.random.default_rng(5)
     noise = 100.0 * mock.imaging.noise_map
     return mock.model + noise * rng.standard_normal(noise.shape), noise, mock.imaging

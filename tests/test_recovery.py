@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mgelens import simulate
+from mgelens import mock_lenses
 from mgelens.grid import pixel_centres
 from mgelens.recovery import (
     TrueLightRefit,
@@ -29,7 +29,7 @@ def truth_of(lens) -> dict:
 
 
 def test_true_mass_parameters_of_paper_and_population_mocks():
-    m1 = true_mass_parameters(truth_of(simulate.paper_mock("M1")))
+    m1 = true_mass_parameters(truth_of(mock_lenses.paper_mock("M1")))
     assert m1 == {
         "mass.centre_x": 0.013,
         "mass.centre_y": -0.07,
@@ -40,7 +40,7 @@ def test_true_mass_parameters_of_paper_and_population_mocks():
         "shear.gamma_1": 0.0,
         "shear.gamma_2": 0.0,
     }
-    lens = simulate.population_lens(0)
+    lens = mock_lenses.population_lens(0)
     population = true_mass_parameters(truth_of(lens))
     assert population["shear.gamma_1"] == lens.mass[1].gamma_1
     with pytest.raises(ValueError, match="no EPL"):

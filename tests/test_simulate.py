@@ -10,7 +10,7 @@ from scipy import ndimage, optimize
 from scipy.special import erf
 
 import mgelens
-from mgelens import cli
+from mgelens import cli, mock_lenses, mock_light, mock_sources
 from mgelens import simulate as sim
 from mgelens.convolve import convolve_image
 from mgelens.grid import pixel_centres, sub_grid
@@ -24,16 +24,16 @@ SPEC_TOTAL_FLUX = {"M1": 643.0, "M2": 460.0, "M3": 1140.0}
 @pytest.fixture(scope="module")
 def m1():
     """M1 at the paper's settings (151×151, 16×16 sub-pixels, seed 1)."""
-    return sim.simulate(sim.paper_mock("M1"))
+    return sim.simulate(mock_lenses.paper_mock("M1"))
 
 
 @pytest.fixture(scope="module")
 def population_mock():
     """Population lens 3 (seed 2024): q gradient, a 20° twist and boxy isophotes."""
-    return sim.simulate(sim.population_lens(3))
+    return sim.simulate(mock_lenses.population_lens(3))
 
 
-def pixel_integrated_mge(table: sim.PaperMock, size: int, scale: float) -> np.ndarray:
+def pixel_integrated_mge(table: mock_lenses.PaperMock, size: int, scale: float) -> np.ndarray:
     """Exact pixel averages of an mgefit MGE: erf along y, 24-node Gauss-Legendre along x.
 
     Independent of mgelens: each Gaussian is I exp[−(x′² + y′²/q²)/(2σ²)] with x′ along
@@ -66,7 +66,7 @@ def pixel_integrated_mge(table: sim.PaperMock, size: int, scale: float) -> np.nd
 
 
 def test_m1_lens_light_equals_pixel_integrated_gaussian_sum(m1):
-    reference = pixel_integrated_mge(sim.PAPER_MOCKS["M1"], 151, PIXEL_SCALE)
+    reference = pixel_integrated_mge(mock_lenses.PAPER_MOCKS["M1"], 151, PIXEL_SCALE)
     difference = m1.lens_light - reference
     # 16×16 midpoint rule: error (Δ/16)²/24 ∇²I, largest at the peak (σ_min = 0.013″).
     assert np.max(np.abs(difference)) < 1e-3 * reference.max()
@@ -78,7 +78,7 @@ def test_m1_lens_light_equals_pixel_integrated_gaussian_sum(m1):
 
 @pytest.mark.parametrize("name", ["M1", "M2", "M3"])
 def test_total_lens_flux_matches_spec(name):
-    table = sim.PAPER_MOCKS[name]
+    table = mock_lenses.PAPER_MOCKS[name]
     q = np.array(table.axis_ratios)
     intensity = 10.0 ** np.array(table.log_intensities)
     sigma = 10.0 ** np.array(table.log_sigmas)
@@ -127,7 +127,7 @@ def test_truth_images_add_up_to_the_noise_free_data(m1, tmp_path):
     assert truth["conventions_version"] == mgelens.CONVENTIONS_VERSION
     assert truth["seed"] == 1
     assert truth["mass"][0]["parameters"]["slope"] == 2.1
-    assert sim.mass_from_truth(truth) == [sim.PAPER_MOCKS["M1"].mass()]
+    assert sim.mass_from_truth(truth) == [mock_lenses.PAPER_MOCKS["M1"].mass()]
 
 
 def test_noise_map_matches_the_scatter_of_noise_realisations(m1):
@@ -212,7 +212,7 @@ def test_population_isophote_truth_matches_an_ellipse_fit(population_mock):
 
 
 def test_isophote_light_label_solves_the_isophote_equation():
-    light = sim.population_lens(3).light
+    light = mock_lenses.population_lens(3).light
     for a in (0.05, 0.3, 1.0, 2.7):
         x, y = light.isophote_curve(a, 90)
         np.testing.assert_allclose(light.semi_major_axis(x, y), a, rtol=1e-6)
@@ -222,17 +222,17 @@ def test_isophote_light_label_solves_the_isophote_equation():
 
 def test_crossing_isophotes_are_rejected():
     with pytest.raises(ValueError, match="isophotes change too fast"):
-        sim.IsophoteLight(
+        mock_light.IsophoteLight(
             (0.0, 0.0), 1.0, 1.0, 4.0,
-            axis_ratio=sim.Transition(0.5, 0.5),
-            angle=sim.Transition(0.0, 90.0, 1.0, 0.1),
-            a4=sim.Transition(0.0, 0.0),
+            axis_ratio=mock_light.Transition(0.5, 0.5),
+            angle=mock_light.Transition(0.0, 90.0, 1.0, 0.1),
+            a4=mock_light.Transition(0.0, 0.0),
         )  # fmt: skip
 
 
 def test_oversampled_image_follows_the_sub_grid_convention():
     """Fine-grid evaluation equals mgelens.grid's sub-grid + bin (SPEC §1.3), any origin."""
-    light = sim.PAPER_MOCKS["M2"].light()
+    light = mock_lenses.PAPER_MOCKS["M2"].light()
     shape, origin = (9, 12), (0.11, -0.04)
     x, y = pixel_centres(shape, PIXEL_SCALE, origin)
     grid = sub_grid(x, y, PIXEL_SCALE, 5)
@@ -246,7 +246,7 @@ def test_oversampled_image_follows_the_sub_grid_convention():
 
 
 def test_mge_light_uses_major_axis_sigma_and_ccw_angles():
-    light = sim.MGELight.from_table((0.1, -0.2), [0.5], [30.0], [0.0], [np.log10(0.4)])
+    light = mock_light.MGELight.from_table((0.1, -0.2), [0.5], [30.0], [0.0], [np.log10(0.4)])
     major = np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)])
     minor = np.array([-np.sin(np.pi / 6), np.cos(np.pi / 6)])
     # one σ along the major axis (0.4″) and along the minor axis (0.2″): e^{-1/2}
@@ -267,7 +267,7 @@ def test_gaussian_psf_is_normalised_with_one_pixel_sigma():
 def test_image_source_is_bilinear_with_row_index_along_y():
     pixels = np.zeros((5, 7))
     pixels[3, 1] = 2.0
-    source = sim.ImageSource(pixels, 0.1, centre=(0.5, -0.3))
+    source = mock_sources.ImageSource(pixels, 0.1, centre=(0.5, -0.3))
     x_peak, y_peak = 0.5 + (1 - 3) * 0.1, -0.3 + (3 - 2) * 0.1
     assert source.image(np.array(x_peak), np.array(y_peak)) == pytest.approx(2.0)
     assert source.image(np.array(x_peak + 0.05), np.array(y_peak)) == pytest.approx(1.0)
@@ -277,8 +277,8 @@ def test_image_source_is_bilinear_with_row_index_along_y():
 
 @pytest.mark.parametrize("name", ["M1", "M2", "M3"])
 def test_paper_mock_sources_sit_near_the_caustic_centre(name):
-    lens = sim.paper_mock(name)
-    table = sim.PAPER_MOCKS[name]
+    lens = mock_lenses.paper_mock(name)
+    table = mock_lenses.PAPER_MOCKS[name]
     assert lens.caustic_centre == pytest.approx(table.centre, abs=1e-9)
     offset = np.hypot(*np.subtract(lens.source.centre, lens.caustic_centre))
     assert 0.05 <= offset <= 0.15
@@ -286,18 +286,18 @@ def test_paper_mock_sources_sit_near_the_caustic_centre(name):
     small = sim.Observation(image_size=21, sub_size=1)
     extent = sim.simulate(lens, small).truth["source"]["extent"]
     assert 1.0 <= extent <= 1.6  # SPEC §10.3: total extent ≈ 1.0–1.5″
-    assert sim.paper_mock(name).source == lens.source  # deterministic for a given seed
-    assert sim.paper_mock(name, seed=11).source != lens.source
+    assert mock_lenses.paper_mock(name).source == lens.source  # deterministic for a given seed
+    assert mock_lenses.paper_mock(name, seed=11).source != lens.source
 
 
 def test_noise_seed_changes_the_noise_alone():
     """Another noise seed: the same lens, source and noise-free images; data that differ
     from the mock's by pure Poisson noise (the model's residuals keep unit variance)."""
     small = sim.Observation(image_size=41, sub_size=2)
-    own = sim.simulate(sim.paper_mock("M2"), small)
-    other_lens = sim.paper_mock("M2", noise_seed=11)
+    own = sim.simulate(mock_lenses.paper_mock("M2"), small)
+    other_lens = mock_lenses.paper_mock("M2", noise_seed=11)
     other = sim.simulate(other_lens, small)
-    assert other_lens.source == sim.paper_mock("M2").source
+    assert other_lens.source == mock_lenses.paper_mock("M2").source
     assert other_lens.seed == 11
     assert "source seed 2, noise seed 11" in other_lens.recipe
     np.testing.assert_array_equal(other.model, own.model)
@@ -309,24 +309,24 @@ def test_noise_seed_changes_the_noise_alone():
         assert 0.9 < residuals.std() < 1.1
     expected = sim.noisy_data(own.model, small.exposure_time, small.sky, np.random.default_rng(11))
     np.testing.assert_array_equal(other.imaging.data, expected)
-    assert sim.paper_mock("M2", noise_seed=2) == sim.paper_mock("M2")
+    assert mock_lenses.paper_mock("M2", noise_seed=2) == mock_lenses.paper_mock("M2")
     with pytest.raises(ValueError, match="noise_seed must be >= 0, got -1"):
-        sim.paper_mock("M2", noise_seed=-1)
+        mock_lenses.paper_mock("M2", noise_seed=-1)
 
 
 def test_paper_mock_masses_follow_spec_table():
     rows = {"M1": (1.2, 0.80, 45, 2.1), "M2": (1.0, 0.77, 60, 1.9), "M3": (1.1, 0.75, 30, 2.0)}
     for name, (einstein_radius, q, angle, slope) in rows.items():
-        mass = sim.paper_mock(name).mass
+        mass = mock_lenses.paper_mock(name).mass
         assert len(mass) == 1  # no external shear in the truth (SPEC §10.2)
-        assert mass[0].centre == sim.PAPER_MOCKS[name].centre
+        assert mass[0].centre == mock_lenses.PAPER_MOCKS[name].centre
         assert (mass[0].einstein_radius, mass[0].axis_ratio) == (einstein_radius, q)
         assert (mass[0].angle, mass[0].slope) == (angle, slope)
-    assert [len(sim.PAPER_MOCKS[n].axis_ratios) for n in ("M1", "M2", "M3")] == [16, 16, 12]
+    assert [len(mock_lenses.PAPER_MOCKS[n].axis_ratios) for n in ("M1", "M2", "M3")] == [16, 16, 12]
 
 
 def test_population_is_slacs_like_and_reproducible():
-    lenses = [sim.population_lens(i) for i in range(sim.POPULATION_SIZE)]
+    lenses = [mock_lenses.population_lens(i) for i in range(mock_lenses.POPULATION_SIZE)]
     assert [lens.name for lens in lenses[:3]] == ["P00", "P01", "P02"]
     epl = [lens.mass[0] for lens in lenses]
     shear = [lens.mass[1] for lens in lenses]
@@ -339,9 +339,9 @@ def test_population_is_slacs_like_and_reproducible():
         for lens in lenses
     ]
     assert 5 < sum(np.rad2deg(t) > 10.0 for t in twisted) < 30
-    assert {lens.source.kind for lens in lenses} == set(sim.SOURCE_KINDS)
-    assert sim.population_lens(5) == lenses[5]
-    assert sim.population_lens(5, population_seed=1).light != lenses[5].light
+    assert {lens.source.kind for lens in lenses} == set(mock_sources.SOURCE_KINDS)
+    assert mock_lenses.population_lens(5) == lenses[5]
+    assert mock_lenses.population_lens(5, population_seed=1).light != lenses[5].light
 
 
 def test_cli_simulates_an_image_source(tmp_path):
@@ -384,6 +384,6 @@ def test_cli_reports_bad_input(tmp_path, caplog, argv, message):
 
 def test_unknown_mock_names_the_choices():
     with pytest.raises(ValueError, match="unknown mock 'M9'; choose one of M1, M2, M3"):
-        sim.paper_mock("M9")
+        mock_lenses.paper_mock("M9")
     with pytest.raises(ValueError, match="unknown source kind"):
-        sim.procedural_source("elliptical", (0.0, 0.0), np.random.default_rng(0))
+        mock_sources.procedural_source("elliptical", (0.0, 0.0), np.random.default_rng(0))

@@ -46,7 +46,8 @@ import numpy as np
 import pytest
 
 from mgelens.mask import circular
-from mgelens.simulate import paper_mock, simulate
+from mgelens.mock_lenses import paper_mock
+from mgelens.simulate import simulate
 from mgelens.smoothness import evidence_scan as scheme_scan
 from mgelens.smoothness import jumps, mock_dataset, scan_model
 from mgelens.source.regularization import AdaptiveBrightnessSplit, Constant, ConstantSplit

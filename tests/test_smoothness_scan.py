@@ -8,7 +8,8 @@ import pytest
 
 from mgelens.cli import main
 from mgelens.mask import circular
-from mgelens.simulate import Observation, paper_mock, simulate, write_mock
+from mgelens.mock_lenses import paper_mock
+from mgelens.simulate import Observation, simulate, write_mock
 from mgelens.smoothness import (
     EDGE_RULES,
     SCHEMES,

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from mgelens import simulate
+from mgelens import mock_lenses, simulate
 from mgelens.fit import FitDataset
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
@@ -64,7 +64,7 @@ def _mock_folder(folder, noise_factor: float, with_source: bool = True):
         source_plane_size=81,
         source_plane_pixel_scale=0.025,
     )
-    mock = simulate.simulate(simulate.paper_mock("M1"), observation)
+    mock = simulate.simulate(mock_lenses.paper_mock("M1"), observation)
     model = mock.model if with_source else mock.model - mock.lensed_source_blurred
     noise = noise_factor * mock.imaging.noise_map
     data = model + noise * np.random.default_rng(3).standard_normal(noise.shape)
@@ -96,7 +96,7 @@ def mock_start(mock_problem):
 
 
 def test_search_finds_the_mocks_mass_from_nothing_but_the_data(mock_problem, mock_start):
-    truth = simulate.paper_mock("M1").mass[0]
+    truth = mock_lenses.paper_mock("M1").mass[0]
     values = mock_start.values
     # M1's EPL (γ 2.1, θ_E 1.2″) seen by an SIE: θ_E 1.18″ in M1's full SP
     assert abs(values["mass.einstein_radius"] / truth.einstein_radius - 1) < 0.05

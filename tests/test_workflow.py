@@ -22,7 +22,7 @@ from workflow_run import (
     snakemake,
 )
 
-from mgelens import cli
+from mgelens import cli, mock_lenses
 from mgelens import simulate as sim
 from mgelens.recovery import true_mass_parameters
 from mgelens.sheet import read_sample_sheet
@@ -91,7 +91,7 @@ def test_dry_run_of_the_population_sample(tmp_path):
     result = snakemake("-n", "--configfile", "config/population.yaml", workdir=tmp_path)
     assert result.returncode == 0, result.stderr
     counts = job_counts(result.stdout + result.stderr)
-    assert counts["simulate_mock"] == counts["preview"] == sim.POPULATION_SIZE
+    assert counts["simulate_mock"] == counts["preview"] == mock_lenses.POPULATION_SIZE
     assert "smoothness" not in counts  # no M1 in the population
 
 
@@ -359,13 +359,13 @@ def test_sample_sheets_agree_with_the_mock_recipes():
     assert list(paper.index) == ["M1", "M2", "M3"]
     for name, row in paper.iterrows():
         assert row["mock"] == name
-        table = sim.PAPER_MOCKS[name]
+        table = mock_lenses.PAPER_MOCKS[name]
         assert (row["z_lens"], row["z_source"]) == (table.z_lens, table.z_source)
         assert row["mask_radius"] == table.mask_radius
     population = read_sheet("population.tsv")
-    assert len(population) == sim.POPULATION_SIZE
+    assert len(population) == mock_lenses.POPULATION_SIZE
     for index, row in population.iterrows():
-        lens = sim.population_lens(index)
+        lens = mock_lenses.population_lens(index)
         assert row["lens"] == row["mock"] == lens.name
         assert row["z_lens"] == pytest.approx(lens.z_lens, abs=1e-4)
         assert row["z_source"] == pytest.approx(lens.z_source, abs=1e-4)

@@ -150,3 +150,10 @@ def blurring_mask(mask: np.ndarray, kernel_shape: tuple[int, int]) -> np.ndarray
     reach = ndimage.binary_dilation(~mask, structure=structure)
     region = reach & mask
     return ~region
+
+
+def flat_points(x, y) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+    """Contiguous float64 1D copies of broadcast ``x``, ``y`` and their common shape (for
+    kernels that take flat point arrays; reshape their output to the shape)."""
+    x, y = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+    return np.ascontiguousarray(x).ravel(), np.ascontiguousarray(y).ravel(), x.shape

@@ -15,7 +15,7 @@ names the install command when it is missing.
 
 Lens ``L{index:02d}`` of a population seed is drawn from ``default_rng([seed, index, 10])``
 (its source from stream 11, its noise from stream 12), over a wider range than the
-population mocks of :func:`mgelens.simulate.population_lens`, so that shallow and steep
+population mocks of :func:`mgelens.mock_lenses.population_lens`, so that shallow and steep
 slopes, strong shear and flat lenses all occur:
 
 * mass: EPL centre N(0, 0.02″) per axis; θ_E ~ U(0.8, 1.6)″; γ ~ U(1.75, 2.45);
@@ -44,12 +44,11 @@ import numpy as np
 import mgelens
 from mgelens.imaging import Imaging
 from mgelens.mass import EPL, ExternalShear
+from mgelens.mock_lenses import DEFAULT_POPULATION_SEED, POPULATION_MASK_RADIUS
 from mgelens.simulate import (
     BRIGHTNESS_UNIT,
-    DEFAULT_POPULATION_SEED,
     FILE_DESCRIPTIONS,
     MOCK_FILES,
-    POPULATION_MASK_RADIUS,
     MockImaging,
     Observation,
     mass_dict,
@@ -293,7 +292,7 @@ def independent_lens(index: int, population_seed: int = DEFAULT_POPULATION_SEED)
 
 def caustic_centre(mass) -> tuple[float, float]:
     """Source-plane position of the mass centre by lenstronomy's ray shooting: the mean
-    over 16 points on a 10⁻³″ circle about it (as :func:`mgelens.simulate.caustic_centre`)."""
+    over 16 points on a 10⁻³″ circle about it (as :func:`mgelens.mock_lenses.caustic_centre`)."""
     require_lenstronomy()
     from lenstronomy.LensModel.lens_model import LensModel
 

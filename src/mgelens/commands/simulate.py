@@ -22,7 +22,7 @@ import dataclasses
 import logging
 import time
 
-from mgelens import simulate
+from mgelens import mock_lenses, mock_sources, simulate
 from mgelens.commands import add_threads_argument
 from mgelens.independent_mock import (
     IndependentLens,
@@ -44,7 +44,7 @@ def register(subparsers) -> None:
     )
     recipe = parser.add_mutually_exclusive_group(required=True)
     recipe.add_argument(
-        "--mock", choices=sorted(simulate.PAPER_MOCKS), help="one of the paper's mocks"
+        "--mock", choices=sorted(mock_lenses.PAPER_MOCKS), help="one of the paper's mocks"
     )
     recipe.add_argument(
         "--population-index", type=int, metavar="I", help="lens I of the mock population"
@@ -58,7 +58,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--population-seed",
         type=int,
-        default=simulate.DEFAULT_POPULATION_SEED,
+        default=mock_lenses.DEFAULT_POPULATION_SEED,
         metavar="S",
         help="seed of the mock population (default %(default)s)",
     )
@@ -105,14 +105,14 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def build_lens(args: argparse.Namespace) -> simulate.MockLens | IndependentLens:
+def build_lens(args: argparse.Namespace) -> mock_lenses.MockLens | IndependentLens:
     """The mock lens described by the parsed arguments: a
-    :class:`~mgelens.simulate.MockLens` or an independent mock's
+    :class:`~mgelens.mock_lenses.MockLens` or an independent mock's
     :class:`~mgelens.independent_mock.IndependentLens`."""
     if args.independent_index is not None:
         return _independent_lens(args)
     if args.mock is not None:
-        lens = simulate.paper_mock(args.mock, seed=args.seed, noise_seed=args.noise_seed)
+        lens = mock_lenses.paper_mock(args.mock, seed=args.seed, noise_seed=args.noise_seed)
     else:
         for option, value in (("--seed", args.seed), ("--noise-seed", args.noise_seed)):
             if value is not None:
@@ -120,12 +120,12 @@ def build_lens(args: argparse.Namespace) -> simulate.MockLens | IndependentLens:
                     f"{option} applies to paper mocks only; population lenses derive their "
                     "seeds from --population-seed and --population-index"
                 )
-        lens = simulate.population_lens(args.population_index, args.population_seed)
+        lens = mock_lenses.population_lens(args.population_index, args.population_seed)
     if (args.source_image is None) != (args.source_pixel_scale is None):
         raise ValueError("--source-image and --source-pixel-scale must be given together")
     if args.source_image is not None:
-        pixels = simulate.load_source_image(args.source_image)
-        lens = simulate.with_image_source(
+        pixels = mock_sources.load_source_image(args.source_image)
+        lens = mock_lenses.with_image_source(
             lens, pixels, args.source_pixel_scale, path=args.source_image
         )
     if args.name:
