@@ -905,8 +905,9 @@ class MassShape:
     critical_curve_ellipse : Ellipse or None
         :func:`fit_ellipse` of the critical curve.
     critical_curve_einstein_radius : float or None
-        Effective Einstein radius sqrt(area/π) of the critical curve, arcsec (not the
-        profile's θ_E parameter: 1.180″ against θ_E = 1.2″ for M1's true mass).
+        Effective Einstein radius sqrt(area/π) of the critical curve, arcsec; not the
+        profile's θ_E parameter (SPEC §3.4), from which it differs for elliptical
+        power laws.
     """
 
     axis_ratio: float

@@ -5,10 +5,9 @@ arrays, the curvature matrix). glibc's malloc serves such sizes from ``mmap`` or
 the top of its heap to the system once more than ``M_TRIM_THRESHOLD`` is free, and both
 thresholds adapt to the process's past allocations. After numba compiled the kernels in
 the process (a fresh clone, an edited kernel: the first phase jobs of a workflow), every
-evaluation then maps fresh pages: on M1's SP, 1,500 page faults per evaluation, 14.6 s of
-system time in 3,917 evaluations, the sampling 30 % slower than in a process that loaded
-the kernels from numba's cache. Fixed thresholds remove this (177,000 faults in all,
-1.3 s).
+evaluation then maps fresh pages, and the sampling runs markedly slower than in a process
+that loaded the kernels from numba's cache. Fixed thresholds remove this
+(docs/design_notes.md, "Freed memory").
 """
 
 import ctypes

@@ -48,10 +48,9 @@ MAX_ITERATIONS = 10_000
 STAGNATION_LIMIT = 3
 """The NNLS stops when the passive set is unchanged for this many consecutive outer iterations."""
 ENTERING_BLOCK = 10
-"""Unknowns entering the passive set per outer NNLS iteration (the largest gradients). On
-the configuration-R system (1524 unknowns) 1, 6, 10 and 16 take 349, 48, 30 and 20 outer
-iterations and 0.21, 0.123, 0.114 and 0.116 s; on M2's MASS and LIGHT systems (630) 10 is
-as fast as any other size to 5 %."""
+"""Unknowns entering the passive set per outer NNLS iteration (the largest gradients):
+fewer outer iterations per solve, each a little dearer; 10 is the fastest measured
+(docs/design_notes.md, "NNLS entering block")."""
 _REFACTOR_SPEEDUP = 6.0
 """Time of a Givens element operation over that of a LAPACK Cholesky flop (measured 4–8)."""
 _FASTMATH = {"reassoc", "contract", "nsz"}
@@ -375,9 +374,8 @@ def _solve_source_first(
     set over the free unknowns; without it the unconstrained solution gives it.
 
     With ``start`` the NNLS needs no factor of Q, so only the source block is factorised
-    (in its own order: the log det does not depend on it). That, and not copying Q when
-    nothing is fixed, saves 3.3 of 35.6 ms per evaluation on M2's MASS (500 source
-    pixels, ~130 lens-light Gaussians) and 5.5 of 32 ms on its LIGHT. A Q that is not
+    (in its own order: the log det does not depend on it), and Q is not copied when
+    nothing is fixed (docs/design_notes.md, "Warm-started solves"). A Q that is not
     positive definite outside the source block is then noticed only through a passive
     block (:func:`reconstruction_positive_only`).
     """

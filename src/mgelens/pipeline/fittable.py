@@ -22,16 +22,14 @@ from mgelens.mask import SLACS_NOISE_THRESHOLD, largest_inside_radius
 MIN_SIGNAL_TO_NOISE = 5.0
 """Smallest integrated signal-to-noise ratio Σd / √Σσ² of the informative pixels inside the
 mask that a phase fits. Data without light give N(0, 1), so 5 refuses them (all-zero or
-mis-scaled data give about 0); the real SLACS cutouts give 432 and more in their 3.0″
-masks, the mocks M1–M3 1,257–1,730, the tests' 31×31 mock with 100× the noise 8.9. The
-integrated ratio is used rather than the peak pixel's: the peak of pure noise over the
-10⁴ pixels of a 3″ mask reaches 4–5σ, above the test mock's 3.4."""
+mis-scaled data give about 0), far below any lens measured (docs/design_notes.md,
+"Fittable data"). The integrated ratio is used rather than the peak pixel's: the peak
+of pure noise over the 10⁴ pixels of a 3″ mask reaches 4–5σ."""
 
 MIN_PIXELS_PER_PARAMETER = 10
 """Fewest informative pixels inside the mask per free (non-linear) parameter of a phase:
 fewer, and the data cannot constrain the model (a 0.08″ mask holds 9 pixels for SP's 17
-parameters). SP in the SLACS 3.0″ masks has about 600 per parameter, in M1's 1.8″ mask
-about 240."""
+parameters); real masks hold hundreds per parameter."""
 
 
 def informative_pixels(imaging: Imaging, mask: np.ndarray) -> np.ndarray:

@@ -320,11 +320,10 @@ def reference_passive_set(problem: PhaseProblem) -> np.ndarray | None:
     Every sample of a phase starts its NNLS from this set, which makes sense where each
     linear unknown means the same thing in every sample: the same lens-light or source
     Gaussian, or the source pixel of the same image-plane centre (SP, SPix1, LIGHT,
-    MASS). On M2's MASS the posterior samples' final passive sets differ from the
-    reference in 20–40 of 630 unknowns, and from the unconstrained solution's positive
-    set (the default start) in about 140: the NNLS takes 7–10 instead of 20–26 outer
-    iterations and an evaluation 38 instead of 49 ms. LIGHT gains about 3 ms of 39; SP
-    and SPix1 neither gain nor lose. ``None`` where the unknowns move (SPix2's k-means
+    MASS): the samples' final passive sets lie closer to the reference's than to the
+    unconstrained solution's positive set (the default start), so the NNLS needs fewer
+    outer iterations (docs/design_notes.md, "Warm-started solves"). ``None`` where the
+    unknowns move (SPix2's k-means
     mesh is recomputed per sample), for the unconstrained solve, or when the reference
     cannot be fitted.
     """
@@ -509,10 +508,9 @@ def _sample_runs(
     sampler has ``n_processes`` ≥ 2, up to ``n_processes`` of them side by side in worker
     processes of one thread, each run in one process (:func:`_sample_alone`) instead of
     one run at a time in a likelihood pool. Each run checkpoints and resumes on its own
-    and draws the one-process run's samples: on M1's quick MASS (two meshes of 500
-    pixels), ``samples.csv`` was byte-identical to the one-process phase's, which took
-    394 s; side by side took 189 s, a likelihood pool of two 207 s (other samples, 5,900
-    calls against 6,500).
+    and draws the one-process run's samples (``samples.csv`` byte-identical), unlike a
+    likelihood pool, which changes the random streams (docs/design_notes.md, "MASS
+    meshes side by side").
     """
     n_workers = min(sampler.n_processes, len(runs))
     if n_workers < 2:
@@ -923,10 +921,8 @@ def chain_settings(name: str, settings: SlamSettings) -> list[SlamSettings]:
     every other phase.
 
     The MASS posterior of one mesh is conditional on where k-means put its 500–1500
-    centres. On M3 (quick profile) two meshes gave θ_E 1.0966 (1.0936, 1.0996) and 1.1044
-    (1.1010, 1.1084) and γ 1.973 (1.948, 1.998) and 2.019 (2.001, 2.049), truth 1.1 and
-    2.0: the mesh moves the posterior by more than its own 3σ width. Pooling reports that
-    spread.
+    centres, and the mesh can move it by more than its own 3σ width
+    (docs/design_notes.md, "Pooled source meshes"). Pooling reports that spread.
     """
     if name != "mass" or settings.mass_meshes == 1:
         return [settings]

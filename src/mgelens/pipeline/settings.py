@@ -148,10 +148,8 @@ class SlamSettings:
         kernel holding every entry ≥ that fraction of its peak: 1e−10 (paper) changes no
         model image; quick's 1e−4 cuts the mock's 21×21 Gaussian PSF (σ = 1 pixel) to
         9×9, losing 6e−6 of its flux, and leaves the SLACS 15×15 PSFs whole. Quick's 2×2
-        source sub-grid (paper 4×4) makes a pixelized evaluation about 20 % faster; on
-        M1 it moved the peak of ln ε along γ (other mass parameters true) by < 0.0001
-        and gave the same MASS posterior (γ 2.086 (2.053, 2.113) against 2.088 (2.072,
-        2.111) with 4×4, truth 2.1).
+        source sub-grid (paper 4×4) makes a pixelized evaluation about 20 % faster and
+        leaves the MASS posterior as it was (docs/design_notes.md, "Source sub-grid").
     allow_unconverged : bool
         Let a phase build on an earlier phase whose sampler did not converge (its
         ``result.json`` says ``converged: false``, e.g. capped by ``max_calls``). Off, such a

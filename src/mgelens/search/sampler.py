@@ -126,8 +126,7 @@ discard_exploration
     The fields from ``checkpoint_every`` on change only how a run is executed, not its
     result, except that a pool (``n_processes > 1``) changes both samplers' random
     streams: dynesty draws its proposals in queues of ``queue_size``, nautilus trains its
-    networks in the pool (on M1's MASS, capped at 1,200 calls, 2 workers gave other
-    samples than one process with the same seed).
+    networks in the pool, so the samples differ from one process's with the same seed.
     """
 
     method: str = "dynesty_static"
@@ -491,8 +490,8 @@ def _install(evaluation: _Evaluation | None) -> None:
 def prepare_worker_process() -> None:
     """Set up a spawned worker process as a phase job is set up: one numba, BLAS and
     OpenMP thread, freed memory kept (:func:`mgelens.memory.keep_freed_memory`). A spawned
-    worker inherits neither from its parent: with numba's default of all cores per worker,
-    two workers on two cores ran M1's SP at 21 ms per evaluation instead of 8.5."""
+    worker inherits neither from its parent, and numba's default of all cores per worker
+    oversubscribes the machine (docs/design_notes.md, "Worker threads")."""
     limit_threads(1)
     keep_freed_memory()
 

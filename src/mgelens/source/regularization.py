@@ -47,9 +47,9 @@ def adaptive_pixel_signals(
     Both agree when every sub-pixel has a single weight 1 (nearest-cell mapping). With
     natural-neighbour weights the anchor's count jumps by one whenever a sub-pixel enters
     or leaves pixel j's natural-neighbour region, where its weight is ~0: S_j, and with it
-    ln det H, then step as the mass model moves the traced sub-pixels (in the MASS-phase
-    likelihood of M2, median step-to-step jumps of ln det H of 2.3 against 0.03 with the
-    weighted mean). The weighted mean is continuous in the weights.
+    ln det H, then step as the mass model moves the traced sub-pixels
+    (docs/design_notes.md, "Adaptive signals"). The weighted mean is continuous in the
+    weights.
 
     S is then normalised by its maximum and raised to the power ``signal_scale`` κ_s.
     Pixels no sub-pixel reaches get S = 0.
