@@ -21,7 +21,7 @@ from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.isophotes import STATISTICS_SMA_RANGE, isophote_table
 from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
-from mgelens.pipeline import models, phases, products
+from mgelens.pipeline import models, phases, products, records
 from mgelens.pipeline.settings import (
     PHASES,
     SettingsError,
@@ -603,7 +603,7 @@ def test_checkpoint_fingerprint_follows_every_input_of_the_likelihood(sp_run, mo
 def test_lens_light_and_mass_models_rebuild_from_json(sp_run):
     results, result = sp_run
     folder = results / "sp"
-    gaussians = phases.lens_light_profiles(folder)
+    gaussians = records.lens_light_profiles(folder)
     best = result.max_likelihood
     assert len(gaussians) == 60
     assert gaussians[45].centre == pytest.approx(
@@ -614,7 +614,7 @@ def test_lens_light_and_mass_models_rebuild_from_json(sp_run):
     )
     assert gaussians[45].sigma == pytest.approx(SP_SPECS[1].sigmas[15])
     assert all(g.intensity >= 0 for g in gaussians)
-    sie, shear = phases.mass_model(folder)
+    sie, shear = records.mass_model(folder)
     assert isinstance(sie, SIE)
     assert sie.einstein_radius == pytest.approx(best["mass.einstein_radius"])
     assert shear.gamma_2 == pytest.approx(best["shear.gamma_2"])
@@ -692,7 +692,7 @@ def test_isophotes_of_a_phase_render_its_lens_light(sp_run, mock_dir, tmp_path):
     assert inside.sum() > 100
     np.testing.assert_allclose(cut[inside], fitted[inside], rtol=0.0, atol=1e-3 * fitted.max())
     summary = json.loads(summary_path.read_text())
-    sie = phases.mass_model(folder)[0]
+    sie = records.mass_model(folder)[0]
     assert summary["mass"]["axis_ratio"] == pytest.approx(sie.axis_ratio)
     # the table and statistics are those of the rendered image (with the noise raised
     # 100×, the fitted light may be compact, leaving no isophote in 0.5–2.5″)
@@ -805,7 +805,9 @@ def test_sersic_chain_fixes_sps_sersics_in_the_spix_phases(sersic_run, mock_dir)
     # the lens light of SPix1/SPix2 is SP's solved Sérsic light, subtracted unchanged (SP's
     # own image differs only by its over-sampling centre, the prior centre (0, 0))
     dataset = phases.spix1_problem(mock_dir, sersic_run, sersic_settings()).dataset
-    expected = dataset.light_grid.blurred_image(list(phases.lens_light_profiles(sersic_run / "sp")))
+    expected = dataset.light_grid.blurred_image(
+        list(records.lens_light_profiles(sersic_run / "sp"))
+    )
     sp_lens = fits.getdata(sersic_run / "sp" / "model.fits", extname="LENS")
     scale = np.abs(sp_lens).max()
     for phase in ("spix1", "spix2"):
@@ -823,7 +825,7 @@ def test_sersic_chain_refits_three_sersics_and_frees_them_with_the_mass(sersic_r
     assert isinstance(
         mass.space.parameter("lens_light.sersic_2.sersic_index").prior, TruncatedGaussian
     )
-    profiles = phases.lens_light_profiles(sersic_run / "mass")
+    profiles = records.lens_light_profiles(sersic_run / "mass")
     assert [type(p).__name__ for p in profiles] == ["Sersic"] * 3
     best = mass.max_likelihood
     assert profiles[2].effective_radius == pytest.approx(
@@ -855,7 +857,7 @@ def test_isophotes_of_a_sersic_phase(sersic_run, mock_dir, tmp_path):
     arguments += ["--summary", str(tmp_path / "summary.json")]
     assert main([*arguments, "--out", str(tmp_path / "isophotes.csv")]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
-    epl = phases.mass_model(folder)[0]
+    epl = records.mass_model(folder)[0]
     assert summary["mass"]["axis_ratio"] == pytest.approx(epl.axis_ratio)
     assert summary["inputs"]["phase"] == str(folder)
 
@@ -924,7 +926,7 @@ def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, moc
             dtype=float
         )
     )
-    written = fits.getheader(sersic_run / "mass" / phases.MODEL_FILE)["LOGEVID"]
+    written = fits.getheader(sersic_run / "mass" / records.MODEL_FILE)["LOGEVID"]
     refit = fit(problem.dataset, problem.model.build(values))
     assert refit.log_evidence == pytest.approx(written, abs=1e-6)
     other = sersic_settings(kmeans_seed=1 - holder[0]["kmeans_seed"], mass_meshes=1)
@@ -964,7 +966,7 @@ def test_max_likelihood_problem_rebuilds_each_phases_written_fit(sersic_run, sp_
         phase = PhaseResult.read(folder)
         problem, values = phases.max_likelihood_problem(phase, mock_dir, folder.parent)
         assert problem.name == phase.phase
-        written = fits.getheader(folder / phases.MODEL_FILE)["LOGEVID"]
+        written = fits.getheader(folder / records.MODEL_FILE)["LOGEVID"]
         refit = fit(problem.dataset, problem.model.build(values))
         assert refit.log_evidence == pytest.approx(written, abs=1e-6), folder
 

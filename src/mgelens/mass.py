@@ -14,6 +14,7 @@ Conventions (SPEC §1.1, §2.1):
 Deflections of the EPL and SIE are numba kernels, parallel over points.
 """
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from math import atan, atanh, sqrt
@@ -272,6 +273,11 @@ class EPL:
         """``(e1, e2) = (f cos 2φ, f sin 2φ)``."""
         return ell_comps_from(self.axis_ratio, self.angle)
 
+    def to_dict(self) -> dict:
+        """The record of this profile: ``{"type": class name, "parameters": fields}``
+        (:func:`mass_from_dict` reads it back)."""
+        return {"type": type(self).__name__, "parameters": dataclasses.asdict(self)}
+
     def convergence(self, x, y) -> np.ndarray:
         """Dimensionless convergence κ at (x, y) arcsec (any broadcastable shapes)."""
         q, t = self.axis_ratio, self.slope - 1.0
@@ -346,6 +352,11 @@ class SIE:
         """``(e1, e2) = (f cos 2φ, f sin 2φ)``."""
         return ell_comps_from(self.axis_ratio, self.angle)
 
+    def to_dict(self) -> dict:
+        """The record of this profile: ``{"type": class name, "parameters": fields}``
+        (:func:`mass_from_dict` reads it back)."""
+        return {"type": type(self).__name__, "parameters": dataclasses.asdict(self)}
+
     def convergence(self, x, y) -> np.ndarray:
         """Dimensionless convergence κ at (x, y) arcsec (any broadcastable shapes)."""
         q = self.axis_ratio
@@ -394,6 +405,11 @@ class ExternalShear:
         """Shear angle ½ atan2(γ₂, γ₁) in degrees, in [0, 180)."""
         angle = 0.5 * float(np.rad2deg(np.arctan2(self.gamma_2, self.gamma_1)))
         return angle + 180.0 if angle < 0.0 else angle
+
+    def to_dict(self) -> dict:
+        """The record of this profile: ``{"type": class name, "parameters": fields}``
+        (:func:`mass_from_dict` reads it back)."""
+        return {"type": type(self).__name__, "parameters": dataclasses.asdict(self)}
 
     def convergence(self, x, y) -> np.ndarray:
         """Zero everywhere, with the broadcast shape of (x, y)."""
@@ -548,3 +564,25 @@ def circle_equivalent_radius(x: np.ndarray, y: np.ndarray) -> float:
     """sqrt(area/π) of a closed polyline (last point equal to the first; shoelace area)."""
     area = 0.5 * abs(float(np.sum(x[:-1] * y[1:] - x[1:] * y[:-1])))
     return float(np.sqrt(area / np.pi))
+
+
+MASS_PROFILES = {"SIE": SIE, "EPL": EPL, "ExternalShear": ExternalShear}
+"""Mass profile classes by the ``type`` name of their records."""
+
+
+def mass_from_dict(entry: dict):
+    """The mass profile of a record written by its ``to_dict`` (extra keys ignored).
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``type``.
+    """
+    if entry["type"] not in MASS_PROFILES:
+        raise ValueError(
+            f"unknown mass profile type {entry['type']!r}; known: {sorted(MASS_PROFILES)}"
+        )
+    parameters = dict(entry["parameters"])
+    if "centre" in parameters:
+        parameters["centre"] = tuple(parameters["centre"])
+    return MASS_PROFILES[entry["type"]](**parameters)

@@ -32,7 +32,7 @@ import mgelens
 from mgelens.atomic import write_fits, write_json
 from mgelens.convolve import convolve_image
 from mgelens.imaging import Imaging
-from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
+from mgelens.mass import EPL, SIE, ExternalShear, mass_from_dict, ray_trace
 from mgelens.mock_lenses import MockLens
 from mgelens.mock_light import MGELight
 from mgelens.mock_sources import ImageSource, ProceduralSource
@@ -413,12 +413,10 @@ def _truth(
     }
 
 
-MASS_TYPES = {"EPL": EPL, "SIE": SIE, "ExternalShear": ExternalShear}
-
-
 def mass_dict(profile) -> dict:
-    """The ``truth.json`` entry of a mass profile: type, parameters and derived values."""
-    entry = {"type": type(profile).__name__, "parameters": dataclasses.asdict(profile)}
+    """The ``truth.json`` entry of a mass profile: its record (``to_dict``) and derived
+    values (ell_comps of an EPL or SIE; magnitude and angle of a shear)."""
+    entry = profile.to_dict()
     if isinstance(profile, EPL | SIE):
         entry["ell_comps"] = list(profile.ell_comps)
     if isinstance(profile, ExternalShear):
@@ -429,15 +427,7 @@ def mass_dict(profile) -> dict:
 
 def mass_from_truth(truth: dict) -> list:
     """Rebuild the mass profiles recorded in a ``truth.json`` content."""
-    profiles = []
-    for entry in truth["mass"]:
-        if entry["type"] not in MASS_TYPES:
-            raise ValueError(f"unknown mass profile type {entry['type']!r} in truth")
-        parameters = dict(entry["parameters"])
-        if "centre" in parameters:
-            parameters["centre"] = tuple(parameters["centre"])
-        profiles.append(MASS_TYPES[entry["type"]](**parameters))
-    return profiles
+    return [mass_from_dict(entry) for entry in truth["mass"]]
 
 
 def write_mock(mock: MockImaging, folder: str | os.PathLike) -> Path:

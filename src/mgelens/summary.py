@@ -74,9 +74,9 @@ import pandas as pd
 
 from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.isophotes import IsophoteStatistics, MassShape
-from mgelens.pipeline.phases import light_components
+from mgelens.pipeline.records import PhaseInputError, light_components, read_fit_record
 from mgelens.published import posterior_einstein_radius, published_values
-from mgelens.search.results import RESULT_FILE, SAMPLES_FILE
+from mgelens.search.results import SAMPLES_FILE
 
 DELTA_Q_THRESHOLD = 0.1
 DELTA_PA_THRESHOLD = 10.0
@@ -231,7 +231,7 @@ def _fit_row(lens_folder: Path) -> dict:
     """The fit columns of one lens (not the published ones)."""
     mass = lens_folder / MASS_PHASE
     try:
-        record = json.loads((mass / RESULT_FILE).read_text())["max_likelihood_fit"]
+        record = read_fit_record(mass)
         posterior = posterior_einstein_radius(pd.read_csv(mass / SAMPLES_FILE))
         quality = json.loads((lens_folder / QUALITY_FILE).read_text())
         row = {"light_model": light_model_label(record)}
@@ -246,6 +246,8 @@ def _fit_row(lens_folder: Path) -> dict:
         row["lensing_flag"] = bool(quality["lensing"]["flag"])
     except FileNotFoundError as exc:
         raise ValueError(f"{lens_folder}: {exc.filename} not found") from exc
+    except PhaseInputError as exc:
+        raise ValueError(f"{lens_folder}: {exc}") from exc
     except (json.JSONDecodeError, KeyError, TypeError) as exc:
         raise ValueError(
             f"{lens_folder}: incomplete MASS result or quality record ({exc!r})"

@@ -47,7 +47,7 @@ from mgelens.isophotes import (
     mass_shape_from,
     render_light,
 )
-from mgelens.pipeline.phases import MODEL_FILE, PhaseInputError, lens_light_profiles, mass_model
+from mgelens.pipeline.records import MODEL_FILE, PhaseInputError, lens_light_profiles, mass_model
 from mgelens.plot import save_png
 from mgelens.plot.isophotes import isophote_figure
 from mgelens.search.results import PhaseResult

@@ -40,7 +40,7 @@ from mgelens.mock_study import (
     mock_table,
     relative_difference,
 )
-from mgelens.pipeline.phases import MODEL_FILE
+from mgelens.pipeline.records import MODEL_FILE
 from mgelens.plot import save_png
 from mgelens.plot.mock_study import LightPanel, lens_light_figure
 from mgelens.search.results import PhaseResult

@@ -21,7 +21,8 @@ from mgelens.fit import FitError, fit
 from mgelens.imaging import ImagingError
 from mgelens.overview import overview_from_fit
 from mgelens.pipeline.models import UnphysicalSample
-from mgelens.pipeline.phases import PhaseInputError, max_likelihood_problem
+from mgelens.pipeline.phases import max_likelihood_problem
+from mgelens.pipeline.records import PhaseInputError
 from mgelens.plot import save_png
 from mgelens.plot.overview import overview_figure
 from mgelens.search.results import RESULT_FILE, PhaseResult

@@ -35,7 +35,7 @@ from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.atomic import write_json
 from mgelens.imaging import Imaging, ImagingError
 from mgelens.mask import circular
-from mgelens.pipeline.phases import MODEL_FILE, light_components, mass_model
+from mgelens.pipeline.records import MODEL_FILE, light_components, mass_model, read_fit_record
 from mgelens.quality import lensing_check, quality_statistic
 from mgelens.search.results import RESULT_FILE
 
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         statistic = quality_statistic(
             nresid, lensed, imaging.noise_map, imaging.mask, imaging.pixel_scale
         )
-        fitted = json.loads((args.phase / RESULT_FILE).read_text())["max_likelihood_fit"]
+        fitted = read_fit_record(args.phase)
         light = light_components(fitted)[0]
         lensing = lensing_check(
             mass_model(args.phase),

@@ -20,7 +20,7 @@ import logging
 from pathlib import Path
 
 from mgelens.atomic import atomic_path
-from mgelens.pipeline.phases import MODEL_FILE
+from mgelens.pipeline.records import MODEL_FILE
 from mgelens.plot import save_png
 from mgelens.plot.comparison import einstein_radius_figure
 from mgelens.plot.mosaic import read_panel, residual_mosaic

@@ -5,17 +5,13 @@
 * :mod:`~mgelens.pipeline.models`: parameter spaces of the phases and the mapping of
   parameter values onto profiles;
 * :mod:`~mgelens.pipeline.phases`: the phases as functions, file in → file out;
+* :mod:`~mgelens.pipeline.records`: the maximum-likelihood model block of ``result.json``,
+  its writer and its readers (the next phases, the analyses);
 * :mod:`~mgelens.pipeline.products`: ``model.fits`` and the adapt image.
 """
 
-from mgelens.pipeline.phases import (
-    PhaseInputError,
-    lens_light_profiles,
-    limit_threads,
-    mass_model,
-    read_phase,
-    run_phase,
-)
+from mgelens.pipeline.phases import limit_threads, read_phase, run_phase
+from mgelens.pipeline.records import PhaseInputError, lens_light_profiles, mass_model
 from mgelens.pipeline.settings import (
     PHASES,
     PROFILES,

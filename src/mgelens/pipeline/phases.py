@@ -6,10 +6,9 @@ one phase folder out.
 ``noise_map.fits``, ``psf.fits``) and writes ``results_dir/<name>/``:
 
 * ``result.json`` and ``samples.csv`` (:class:`~mgelens.search.results.PhaseResult`), with
-  an extra ``max_likelihood_fit`` block in ``result.json``: the maximum-likelihood model
-  with its lens-light components (MGE sets or Sérsics) and their solved intensities, mass
-  profiles and source hyper-parameters, enough to rebuild the lens light
-  (:func:`lens_light_profiles`) and the mass (:func:`mass_model`) from the JSON alone;
+  an extra ``max_likelihood_fit`` block in ``result.json``
+  (:mod:`mgelens.pipeline.records`): the maximum-likelihood model, enough to rebuild the
+  lens light and the mass from the JSON alone;
 * ``model.fits`` (:mod:`mgelens.pipeline.products`); SPix1 also writes
   ``adapt_image.fits``, its lensed-source model, which SPix2, LIGHT and MASS use;
 * ``phase.log`` (appended to on every run) and, while sampling, the sampler's checkpoint
@@ -58,12 +57,18 @@ from mgelens.fit import (
     figure_of_merit,
     fit,
 )
-from mgelens.geometry import axis_ratio_and_angle_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import DATA_FILE, INFO_FILE, MASK_FILE, Imaging
-from mgelens.light import MGESet, Sersic
-from mgelens.mass import EPL, SIE, ExternalShear
 from mgelens.pipeline import fittable, models, products, sp_start
+from mgelens.pipeline.records import (
+    ADAPT_IMAGE_FILE,
+    MODEL_FILE,
+    PhaseInputError,
+    fit_record,
+    light_components,
+    profiles_from_record,
+    read_fit_record,
+)
 from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
 from mgelens.provenance import command_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -82,16 +87,9 @@ from mgelens.threads import limit_threads
 
 logger = logging.getLogger("mgelens.pipeline")
 
-MODEL_FILE = "model.fits"
-ADAPT_IMAGE_FILE = "adapt_image.fits"
 LOG_FILE = "phase.log"
 CHECKPOINT_PREFIX = "checkpoint-"
 IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", MASK_FILE, INFO_FILE)
-MASS_TYPES = {"SIE": SIE, "EPL": EPL, "ExternalShear": ExternalShear}
-
-
-class PhaseInputError(ValueError):
-    """A phase's inputs are missing or inconsistent; the message names the file and fix."""
 
 
 # -- logging ----------------------------------------------------------------
@@ -171,7 +169,7 @@ def read_phase(results_dir: str | Path, name: str, allow_unconverged: bool = Fal
             f"{folder / RESULT_FILE} not found: run phase {name!r} first "
             f"(mgelens phase {name} --results {results_dir} ...)"
         )
-    record = _record(folder)
+    record = read_fit_record(folder)
     result = PhaseResult.read(folder)
     if not (result.output.converged or allow_unconverged):
         raise PhaseInputError(
@@ -401,72 +399,6 @@ def _checkpoint_paths(folder: Path, fingerprints: list[dict]) -> list[Path]:
             logger.info("removing %s: written for other inputs or settings", stale)
             stale.unlink()
     return [folder / f"{stem}.pickle" for stem in stems]
-
-
-def _mass_record(profile) -> dict:
-    return {"type": type(profile).__name__, "parameters": dataclasses.asdict(profile)}
-
-
-def _light_record(component, intensities: np.ndarray) -> dict:
-    q, angle = axis_ratio_and_angle_from(component.ell_comps)
-    geometry = {
-        "centre": list(component.centre),
-        "ell_comps": list(component.ell_comps),
-        "axis_ratio": q,
-        "angle": angle,
-    }
-    if isinstance(component, Sersic):
-        return {
-            "kind": "sersic",
-            **geometry,
-            "effective_radius": component.effective_radius,
-            "sersic_index": component.sersic_index,
-            "intensity": float(intensities[0]),
-        }
-    return {
-        "kind": "mge",
-        **geometry,
-        "sigmas": component.sigmas.tolist(),
-        "intensities": intensities.tolist(),
-    }
-
-
-def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dict:
-    """The ``max_likelihood_fit`` block of ``result.json``.
-
-    Lens-light components, each with its name, ``kind`` ("mge" or "sersic"), centre
-    (arcsec), ell_comps, axis ratio, angle (degrees CCW from +x) and, for an MGE set, σ
-    (minor-axis, arcsec) and solved intensities I₀ (data units per pixel), for a Sérsic
-    R_e (arcsec), n and I_e (data units per pixel; ``fixed`` if an earlier phase set it);
-    mass profiles; source description with its hyper-parameters (and, for the SP source
-    MGE, its solved intensities); figures of merit.
-    """
-    components, start = [], 0
-    intensities = result.lens_light_intensities
-    for spec, component in zip(model.lens_light, result.model.lens_light, strict=True):
-        solved = intensities[start : start + component.n_columns]
-        components.append({"name": spec.name, **_light_record(component, solved)})
-        start += component.n_columns
-    for k, profile in enumerate(result.model.fixed_light):
-        record = _light_record(profile, np.array([profile.intensity]))
-        components.append({"name": f"{record['kind']}_{k}", **record, "fixed": True})
-    source = model.source.describe()
-    source["parameters"] = {
-        k: v for k, v in values.items() if k.split(".")[0] in ("source", "mesh", "regularization")
-    }
-    if result.n_source_light:
-        source["intensities"] = result.source_light_intensities.tolist()
-    return {
-        "log_likelihood": result.log_likelihood,
-        "log_evidence": result.log_evidence,
-        "chi_squared": result.chi_squared,
-        "n_image_pixels": int(result.dataset.data.size),
-        "positive_only": result.solution.positive_only,
-        "n_active_zero": int(result.solution.active_zero.sum()),
-        "lens_light": {"components": components},
-        "mass": [_mass_record(p) for p in result.model.mass],
-        "source": source,
-    }
 
 
 def _write_outputs(
@@ -951,65 +883,3 @@ def max_likelihood_problem(
     problem = PROBLEMS[phase.phase](Path(lens_dir), Path(results_dir), settings)
     values = problem.space.values(problem.space.vector(phase.max_likelihood))
     return problem, values
-
-
-def _record(result_folder: str | Path) -> dict:
-    path = Path(result_folder) / RESULT_FILE
-    if not path.is_file():
-        raise PhaseInputError(f"{path} not found: run the phase first")
-    record = json.loads(path.read_text()).get("max_likelihood_fit")
-    if record is None:
-        raise PhaseInputError(f"{path} has no max_likelihood_fit block")
-    return record
-
-
-def light_components(record: dict) -> list[dict]:
-    """The lens-light component entries of a ``max_likelihood_fit`` record.
-
-    Records written before the 3×Sérsic option list MGE sets under ``sets``; they are
-    read as components of kind "mge".
-    """
-    light = record["lens_light"]
-    if "components" in light:
-        return light["components"]
-    return [{"kind": "mge", **entry} for entry in light["sets"]]
-
-
-def profiles_from_record(record: dict) -> tuple:
-    """Lens-light profiles with their intensities from a ``max_likelihood_fit`` record
-    (see :func:`lens_light_profiles`)."""
-    profiles: list = []
-    for c in light_components(record):
-        centre, ell_comps = tuple(c["centre"]), tuple(c["ell_comps"])
-        if c["kind"] == "sersic":
-            profiles.append(
-                Sersic(centre, ell_comps, c["effective_radius"], c["sersic_index"], c["intensity"])
-            )
-        else:
-            mge = MGESet(centre, ell_comps, c["sigmas"])
-            profiles += mge.gaussians(np.asarray(c["intensities"], dtype=float))
-    return tuple(profiles)
-
-
-def lens_light_profiles(result_folder: str | Path) -> tuple:
-    """The maximum-likelihood lens light of a phase folder, from its ``result.json``.
-
-    Returns
-    -------
-    tuple of Gaussian and Sersic
-        Every Gaussian of every MGE set and every Sérsic (fixed ones included) with its
-        solved intensity, first component first; the light before the PSF is the sum of
-        their ``image(x, y)`` (data units per pixel).
-    """
-    return profiles_from_record(_record(result_folder))
-
-
-def mass_model(result_folder: str | Path) -> tuple:
-    """The maximum-likelihood mass profiles (SIE or EPL, ExternalShear) of a phase folder."""
-    profiles = []
-    for entry in _record(result_folder)["mass"]:
-        parameters = dict(entry["parameters"])
-        if "centre" in parameters:
-            parameters["centre"] = tuple(parameters["centre"])
-        profiles.append(MASS_TYPES[entry["type"]](**parameters))
-    return tuple(profiles)

@@ -1,0 +1,156 @@
+"""The record of a phase's maximum-likelihood model in ``result.json``: its one writer
+(:func:`fit_record`) and its readers, used by the next phases and by every analysis
+(isophotes, recovery, fit quality, the sample summary).
+
+``result.json`` holds the sampler's summary (:class:`~mgelens.search.results.PhaseResult`)
+and the block ``max_likelihood_fit``:
+
+* ``lens_light.components``: each component with its name, ``kind`` ("mge" or "sersic"),
+  centre (arcsec), ell_comps, axis ratio, angle (degrees CCW from +x) and, for an MGE set,
+  σ (minor-axis, arcsec) and solved intensities I₀ (data units per pixel), for a Sérsic
+  R_e (arcsec), n and I_e (data units per pixel; ``fixed`` if an earlier phase set it);
+* ``mass``: each profile's record (``to_dict`` of :mod:`mgelens.mass`);
+* ``source``: the source description with its hyper-parameters (and, for SP's source
+  MGE, its solved intensities);
+* figures of merit: ln L, ln ε, χ², image pixels, the solve and its active bounds.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from mgelens.fit import FitResult
+from mgelens.geometry import axis_ratio_and_angle_from
+from mgelens.light import MGESet, Sersic
+from mgelens.mass import mass_from_dict
+from mgelens.pipeline import models
+from mgelens.search.results import RESULT_FILE
+
+MODEL_FILE = "model.fits"
+"""A phase folder's images of its maximum-likelihood model (:mod:`mgelens.pipeline.products`)."""
+ADAPT_IMAGE_FILE = "adapt_image.fits"
+"""SPix1's adapt image, read by the adaptive regularization of later phases."""
+
+
+class PhaseInputError(ValueError):
+    """A phase's inputs are missing or inconsistent; the message names the file and fix."""
+
+
+def _light_record(component, intensities: np.ndarray) -> dict:
+    q, angle = axis_ratio_and_angle_from(component.ell_comps)
+    geometry = {
+        "centre": list(component.centre),
+        "ell_comps": list(component.ell_comps),
+        "axis_ratio": q,
+        "angle": angle,
+    }
+    if isinstance(component, Sersic):
+        return {
+            "kind": "sersic",
+            **geometry,
+            "effective_radius": component.effective_radius,
+            "sersic_index": component.sersic_index,
+            "intensity": float(intensities[0]),
+        }
+    return {
+        "kind": "mge",
+        **geometry,
+        "sigmas": component.sigmas.tolist(),
+        "intensities": intensities.tolist(),
+    }
+
+
+def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dict:
+    """The ``max_likelihood_fit`` block of ``result.json``.
+
+    Lens-light components, each with its name, ``kind`` ("mge" or "sersic"), centre
+    (arcsec), ell_comps, axis ratio, angle (degrees CCW from +x) and, for an MGE set, σ
+    (minor-axis, arcsec) and solved intensities I₀ (data units per pixel), for a Sérsic
+    R_e (arcsec), n and I_e (data units per pixel; ``fixed`` if an earlier phase set it);
+    mass profiles; source description with its hyper-parameters (and, for the SP source
+    MGE, its solved intensities); figures of merit.
+    """
+    components, start = [], 0
+    intensities = result.lens_light_intensities
+    for spec, component in zip(model.lens_light, result.model.lens_light, strict=True):
+        solved = intensities[start : start + component.n_columns]
+        components.append({"name": spec.name, **_light_record(component, solved)})
+        start += component.n_columns
+    for k, profile in enumerate(result.model.fixed_light):
+        record = _light_record(profile, np.array([profile.intensity]))
+        components.append({"name": f"{record['kind']}_{k}", **record, "fixed": True})
+    source = model.source.describe()
+    source["parameters"] = {
+        k: v for k, v in values.items() if k.split(".")[0] in ("source", "mesh", "regularization")
+    }
+    if result.n_source_light:
+        source["intensities"] = result.source_light_intensities.tolist()
+    return {
+        "log_likelihood": result.log_likelihood,
+        "log_evidence": result.log_evidence,
+        "chi_squared": result.chi_squared,
+        "n_image_pixels": int(result.dataset.data.size),
+        "positive_only": result.solution.positive_only,
+        "n_active_zero": int(result.solution.active_zero.sum()),
+        "lens_light": {"components": components},
+        "mass": [profile.to_dict() for profile in result.model.mass],
+        "source": source,
+    }
+
+
+def read_fit_record(result_folder: str | Path) -> dict:
+    """The ``max_likelihood_fit`` block of a phase folder's ``result.json``."""
+    path = Path(result_folder) / RESULT_FILE
+    if not path.is_file():
+        raise PhaseInputError(f"{path} not found: run the phase first")
+    record = json.loads(path.read_text()).get("max_likelihood_fit")
+    if record is None:
+        raise PhaseInputError(f"{path} has no max_likelihood_fit block")
+    return record
+
+
+def light_components(record: dict) -> list[dict]:
+    """The lens-light component entries of a ``max_likelihood_fit`` record.
+
+    Records written before the 3×Sérsic option list MGE sets under ``sets``; they are
+    read as components of kind "mge".
+    """
+    light = record["lens_light"]
+    if "components" in light:
+        return light["components"]
+    return [{"kind": "mge", **entry} for entry in light["sets"]]
+
+
+def profiles_from_record(record: dict) -> tuple:
+    """Lens-light profiles with their intensities from a ``max_likelihood_fit`` record
+    (see :func:`lens_light_profiles`)."""
+    profiles: list = []
+    for c in light_components(record):
+        centre, ell_comps = tuple(c["centre"]), tuple(c["ell_comps"])
+        if c["kind"] == "sersic":
+            profiles.append(
+                Sersic(centre, ell_comps, c["effective_radius"], c["sersic_index"], c["intensity"])
+            )
+        else:
+            mge = MGESet(centre, ell_comps, c["sigmas"])
+            profiles += mge.gaussians(np.asarray(c["intensities"], dtype=float))
+    return tuple(profiles)
+
+
+def lens_light_profiles(result_folder: str | Path) -> tuple:
+    """The maximum-likelihood lens light of a phase folder, from its ``result.json``.
+
+    Returns
+    -------
+    tuple of Gaussian and Sersic
+        Every Gaussian of every MGE set and every Sérsic (fixed ones included) with its
+        solved intensity, first component first; the light before the PSF is the sum of
+        their ``image(x, y)`` (data units per pixel).
+    """
+    return profiles_from_record(read_fit_record(result_folder))
+
+
+def mass_model(result_folder: str | Path) -> tuple:
+    """The maximum-likelihood mass profiles (SIE or EPL, ExternalShear) of a phase folder."""
+    return tuple(mass_from_dict(entry) for entry in read_fit_record(result_folder)["mass"])
