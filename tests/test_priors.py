@@ -7,15 +7,20 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from mgelens.mass import SLOPE_RANGE
+from mgelens.pipeline.parameters import lens_parameter, limits_of, width_of
 from mgelens.search.priors import (
     Gaussian,
     LogUniform,
     TruncatedGaussian,
     Uniform,
+    WidthModifier,
     passed_prior,
     prior_from_dict,
-    width_modifier,
 )
+
+ABSOLUTE = WidthModifier("absolute", 0.2)
+RELATIVE_QUARTER = WidthModifier("relative", 0.25)
 
 U = np.concatenate([[1e-6, 1e-4], np.linspace(0.001, 0.999, 999), [1 - 1e-4, 1 - 1e-6]])
 
@@ -159,38 +164,47 @@ def test_unknown_prior_type_raises():
     ],
 )
 def test_passed_prior_widths(name, median, half_width, paper_sigma, sigma_2024):
-    paper = passed_prior(name, median, half_width)
-    modern = passed_prior(name, median, half_width, rule="2024")
+    paper = passed_prior(name, median, half_width, width_of(name))
+    modern = passed_prior(name, median, half_width, width_of(name), rule="2024")
     assert paper.mean == modern.mean == median
     assert paper.sigma == pytest.approx(paper_sigma, rel=1e-12)
     assert modern.sigma == pytest.approx(sigma_2024, rel=1e-12)
 
 
 def test_width_modifier_matches_last_component():
-    assert width_modifier("mass.einstein_radius").kind == "relative"
-    assert width_modifier("lens_light.set_3.centre_x").value == 0.05
-    assert width_modifier("einstein_radius_extra").value == 0.5
+    assert width_of("mass.einstein_radius").kind == "relative"
+    assert width_of("lens_light.set_3.centre_x").value == 0.05
+    assert width_of("einstein_radius_extra").value == 0.5
+
+
+def test_lens_model_limits_by_last_component():
+    assert limits_of("lens_light.set_2.ell_comps_1") == (-1.0, 1.0)
+    assert limits_of("mass.einstein_radius") == (0.0, math.inf)
+    assert limits_of("mass.slope") == SLOPE_RANGE  # one source of truth for the slope
+    assert limits_of("regularization.inner_coefficient") == (0.0, math.inf)
+    assert limits_of("shear.gamma_1") == (-math.inf, math.inf)
+    assert lens_parameter("mass.slope", prior=Uniform(1.5, 3.0)).limits == SLOPE_RANGE
 
 
 def test_passed_prior_is_truncated_to_limits():
-    prior = passed_prior("mass.ell_comps_1", 0.95, 0.1, limits=(-1.0, 1.0))
+    prior = passed_prior("mass.ell_comps_1", 0.95, 0.1, width_of("mass.ell_comps_1"), (-1.0, 1.0))
     assert (prior.lower, prior.upper, prior.sigma) == (-1.0, 1.0, 0.2)
     x = prior.transform(np.linspace(0.0, 1.0, 101))
     assert x.min() == -1.0
     assert x.max() == 1.0
     # the mass above the upper limit is cut off: the median moves below μ
     assert prior.transform(0.5) < 0.95
-    theta_e = passed_prior("mass.einstein_radius", 0.1, 0.01, limits=(0.0, math.inf))
+    theta_e = passed_prior("mass.einstein_radius", 0.1, 0.01, RELATIVE_QUARTER, (0.0, math.inf))
     assert theta_e.sigma == pytest.approx(0.025)
     assert theta_e.transform(0.0) == 0.0
 
 
 def test_passed_prior_rejects_bad_input():
     with pytest.raises(ValueError, match="rule"):
-        passed_prior("mass.slope", 2.0, 0.1, rule="2023")
+        passed_prior("mass.slope", 2.0, 0.1, ABSOLUTE, rule="2023")
     with pytest.raises(ValueError, match="zero width"):
-        passed_prior("mass.einstein_radius", 0.0, 0.0, rule="2024")
+        passed_prior("mass.einstein_radius", 0.0, 0.0, RELATIVE_QUARTER, rule="2024")
     with pytest.raises(ValueError, match="outside its limits"):
-        passed_prior("mass.ell_comps_1", 1.5, 0.1, limits=(-1.0, 1.0))
+        passed_prior("mass.ell_comps_1", 1.5, 0.1, ABSOLUTE, (-1.0, 1.0))
     with pytest.raises(ValueError, match="previous_sigma"):
-        passed_prior("mass.slope", 2.0, -0.1)
+        passed_prior("mass.slope", 2.0, -0.1, ABSOLUTE)

@@ -10,7 +10,7 @@ import pytest
 
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
 from mgelens.search.model import Parameter, ParameterSpace
-from mgelens.search.priors import Gaussian, LogUniform, TruncatedGaussian, Uniform
+from mgelens.search.priors import Gaussian, LogUniform, TruncatedGaussian, Uniform, WidthModifier
 from mgelens.search.results import (
     PhaseResult,
     collect_versions,
@@ -27,21 +27,36 @@ from mgelens.search.sampler import (
 
 N = 2000
 E1, E2 = ell_comps_from(0.7, 178.0)  # the angle posterior straddles 0°/180°
+LIMITS = {
+    "mass.ell_comps_1": (-1.0, 1.0),
+    "mass.ell_comps_2": (-1.0, 1.0),
+    "mass.einstein_radius": (0.0, math.inf),
+    "regularization.coefficient": (0.0, math.inf),
+}
+"""The limits the model declares (as mgelens.pipeline.parameters would)."""
+WIDTHS = {
+    "mass.centre_x": WidthModifier("absolute", 0.05),
+    "mass.centre_y": WidthModifier("absolute", 0.05),
+    "mass.ell_comps_1": WidthModifier("absolute", 0.2),
+    "mass.einstein_radius": WidthModifier("relative", 0.25),
+    "regularization.coefficient": WidthModifier("relative", 0.5),
+}
 
 
 @pytest.fixture(scope="module")
 def result() -> PhaseResult:
+    priors = {
+        "mass.centre_x": Gaussian(0.0, 0.1),
+        "mass.ell_comps_1": TruncatedGaussian(0.0, 0.3, -1.0, 1.0),
+        "mass.ell_comps_2": TruncatedGaussian(0.0, 0.3, -1.0, 1.0),
+        "mass.einstein_radius": Uniform(0.0, 8.0),
+        "shear.gamma_1": Uniform(-0.2, 0.2),
+        "shear.gamma_2": Uniform(-0.2, 0.2),
+        "regularization.coefficient": LogUniform(1e-6, 1e6),
+    }
     space = (
-        ParameterSpace.from_priors(
-            {
-                "mass.centre_x": Gaussian(0.0, 0.1),
-                "mass.ell_comps_1": TruncatedGaussian(0.0, 0.3, -1.0, 1.0),
-                "mass.ell_comps_2": TruncatedGaussian(0.0, 0.3, -1.0, 1.0),
-                "mass.einstein_radius": Uniform(0.0, 8.0),
-                "shear.gamma_1": Uniform(-0.2, 0.2),
-                "shear.gamma_2": Uniform(-0.2, 0.2),
-                "regularization.coefficient": LogUniform(1e-6, 1e6),
-            }
+        ParameterSpace(
+            tuple(Parameter(n, prior=p, limits=LIMITS.get(n)) for n, p in priors.items())
         )
         .with_parameter(Parameter("mass.centre_y", value=0.02))
         .with_parameter(Parameter("lens_light.centre_x", tied_to="mass.centre_x"))
@@ -182,7 +197,9 @@ def test_derived_angle_interval_stays_contiguous(result):
 
 def test_passed_priors_from_a_result(result):
     priors = passed_priors(
-        result, ["mass.centre_x", "mass.einstein_radius", "mass.ell_comps_1", "mass.centre_y"]
+        result,
+        ["mass.centre_x", "mass.einstein_radius", "mass.ell_comps_1", "mass.centre_y"],
+        widths=WIDTHS,
     )
     median, interval = result.median, result.interval(3)
 
@@ -200,14 +217,18 @@ def test_passed_priors_from_a_result(result):
     # a parameter fixed before gets the width alone (SPEC §8.2: freed centre → N(c, 0.05″))
     assert (priors["mass.centre_y"].mean, priors["mass.centre_y"].sigma) == (0.02, 0.05)
 
-    wide = passed_priors(result, ["regularization.coefficient"], rule="2024", limits={})
+    wide = passed_priors(
+        result, ["regularization.coefficient"], rule="2024", limits={}, widths=WIDTHS
+    )
     coefficient = wide["regularization.coefficient"]
     assert coefficient.sigma == pytest.approx(0.5 * median["regularization.coefficient"])
     assert coefficient.lower == 0.0
-    clipped = passed_priors(result, ["mass.centre_x"], limits={"mass.centre_x": (-0.5, 0.5)})
+    clipped = passed_priors(
+        result, ["mass.centre_x"], limits={"mass.centre_x": (-0.5, 0.5)}, widths=WIDTHS
+    )
     assert clipped["mass.centre_x"].upper == 0.5
     with pytest.raises(KeyError, match="not a parameter"):
-        passed_priors(result, ["mass.slope"])
+        passed_priors(result, ["mass.slope"], widths=WIDTHS)
 
 
 def test_checksums_and_versions(tmp_path):

@@ -12,7 +12,6 @@ from mgelens.search.model import (
     Parameter,
     ParameterSpace,
     axis_ratio_and_angle,
-    default_limits,
     derived_values,
     names_with_derived,
     shear_magnitude_and_angle,
@@ -124,12 +123,11 @@ def test_json_round_trip(space):
     assert again.parameter("mass.centre_x").limits == (-math.inf, math.inf)
 
 
-def test_default_limits():
-    assert default_limits("lens_light.set_2.ell_comps_1") == (-1.0, 1.0)
-    assert default_limits("mass.einstein_radius") == (0.0, math.inf)
-    assert default_limits("mass.slope") == (1.0, 3.0)
-    assert default_limits("regularization.inner_coefficient") == (0.0, math.inf)
-    assert default_limits("shear.gamma_1") == (-math.inf, math.inf)
+def test_limits_are_the_declarers_and_unbounded_by_default():
+    """The search layer knows no lens names: a parameter is unbounded unless the model
+    that declares it gives limits."""
+    assert Parameter("mass.slope", prior=Uniform(1.5, 3.0)).limits == (-math.inf, math.inf)
+    assert Parameter("mass.slope", value=2.0, limits=(1.2, 3.0)).limits == (1.2, 3.0)
 
 
 @pytest.mark.parametrize(

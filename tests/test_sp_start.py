@@ -17,6 +17,7 @@ from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.mass import SIE, ExternalShear, ray_trace
 from mgelens.pipeline import models, phases, sp_start
+from mgelens.pipeline.parameters import width_of
 from mgelens.pipeline.settings import profile_settings, settings_from_mapping
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
@@ -128,7 +129,8 @@ def test_started_space_passes_each_free_parameter_with_slams_width(mock_problem,
         prior = space.parameter(name).prior
         limits = mock_problem.space.parameter(name).limits
         assert isinstance(prior, TruncatedGaussian)
-        assert prior == passed_prior(name, mock_start.values[name], 0.0, limits, "2024")
+        expected = passed_prior(name, mock_start.values[name], 0.0, width_of(name), limits, "2024")
+        assert prior == expected
     theta = space.parameter("mass.einstein_radius").prior
     assert theta.sigma == pytest.approx(0.25 * mock_start.values["mass.einstein_radius"])
     assert space.parameter("mass.centre_x").prior.sigma == 0.05

@@ -31,9 +31,10 @@ from scipy import optimize
 from mgelens.fit import LensModel, MGESource, PixelizedSource
 from mgelens.light import MGESet, Sersic, log_spaced_sigmas
 from mgelens.mass import EPL, SIE, SLOPE_RANGE, ExternalShear, ray_trace
+from mgelens.pipeline.parameters import lens_parameter, passed
 from mgelens.search.model import Parameter, ParameterSpace
 from mgelens.search.priors import Gaussian, LogUniform, Prior, TruncatedGaussian, Uniform
-from mgelens.search.results import PhaseResult, passed_priors
+from mgelens.search.results import PhaseResult
 from mgelens.source.image_mesh import kmeans_centres, kmeans_weights
 from mgelens.source.regularization import AdaptiveBrightnessSplit, Constant, ConstantSplit
 
@@ -158,7 +159,7 @@ def mge_specs(
 def _geometry(prefix: str, centre: Sequence[Prior], ell_comps: Sequence[Prior]) -> list[Parameter]:
     names = ("centre_x", "centre_y", "ell_comps_1", "ell_comps_2")
     priors = (*centre, *ell_comps)
-    return [Parameter(f"{prefix}.{n}", prior=p) for n, p in zip(names, priors, strict=True)]
+    return [lens_parameter(f"{prefix}.{n}", prior=p) for n, p in zip(names, priors, strict=True)]
 
 
 def lens_light_parameters(
@@ -180,12 +181,14 @@ def lens_light_parameters(
             continue
         geometry = _geometry(spec.prefix, centre, (ell_comps,) * 2)
         if isinstance(spec, SersicSpec):
-            geometry += [Parameter(f"{spec.prefix}.{n}", prior=p) for n, p in SERSIC_PRIORS.items()]
+            geometry += [
+                lens_parameter(f"{spec.prefix}.{n}", prior=p) for n, p in SERSIC_PRIORS.items()
+            ]
         if first is None:
             first = spec.prefix
         else:
             geometry[:2] = [
-                Parameter(f"{spec.prefix}.{n}", tied_to=f"{first}.{n}")
+                lens_parameter(f"{spec.prefix}.{n}", tied_to=f"{first}.{n}")
                 for n in ("centre_x", "centre_y")
             ]
         parameters += geometry
@@ -540,7 +543,7 @@ def frozen_component(previous: PhaseResult, component: str) -> list[Parameter]:
 
 
 def _free(priors: Mapping[str, Prior]) -> list[Parameter]:
-    return [Parameter(name, prior=prior) for name, prior in priors.items()]
+    return [lens_parameter(name, prior=prior) for name, prior in priors.items()]
 
 
 def sp_space(
@@ -558,7 +561,7 @@ def sp_space(
 def spix1_space(sp: PhaseResult, rule: str = "paper") -> ParameterSpace:
     """SPix1: lens light fixed at SP's max-L, SIE + shear passed from SP, one regularization
     coefficient (Constant or ConstantSplit) LogUniform(1e−6, 1e6): 8 free parameters."""
-    mass = passed_priors(sp, PASSED_MASS_NAMES, rule)
+    mass = passed(sp, PASSED_MASS_NAMES, rule)
     coefficient = {"regularization.coefficient": COEFFICIENT_PRIOR}
     return ParameterSpace((*frozen_component(sp, LENS_LIGHT), *_free(mass), *_free(coefficient)))
 
@@ -621,7 +624,7 @@ def passed_component(previous: PhaseResult, component: str, rule: str = "paper")
     """Parameters of ``component`` with priors passed from ``previous`` (SPEC §8.2); its
     fixed values and ties are kept."""
     own = [p for p in previous.space.parameters if p.name.startswith(component + ".")]
-    priors = passed_priors(previous, [p.name for p in own if p.prior is not None], rule)
+    priors = passed(previous, [p.name for p in own if p.prior is not None], rule)
     return [
         Parameter(p.name, prior=priors[p.name], limits=p.limits) if p.name in priors else p
         for p in own
@@ -641,9 +644,9 @@ def mass_space(
     With ``free_lens_light`` (the 3×Sérsic chain) the lens light is fitted together with
     the mass, its priors passed from LIGHT: 8 + 14 free parameters for 3 Sérsics.
     """
-    passed = passed_priors(spix1, PASSED_MASS_NAMES, rule)
-    mass = {n: p for n, p in passed.items() if n.startswith(MASS + ".")}
-    shear = {n: p for n, p in passed.items() if n.startswith(SHEAR + ".")}
+    from_spix1 = passed(spix1, PASSED_MASS_NAMES, rule)
+    mass = {n: p for n, p in from_spix1.items() if n.startswith(MASS + ".")}
+    shear = {n: p for n, p in from_spix1.items() if n.startswith(SHEAR + ".")}
     lens_light = (
         passed_component(light, LENS_LIGHT, rule)
         if free_lens_light

@@ -46,6 +46,7 @@ from mgelens.atomic import write_json
 from mgelens.fit import FitDataset, fit
 from mgelens.mass import SIE, ExternalShear, ray_trace
 from mgelens.pipeline import models
+from mgelens.pipeline.parameters import width_of
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
 from mgelens.search.priors import passed_prior
@@ -364,7 +365,8 @@ def started_space(space: ParameterSpace, start: SPStart) -> ParameterSpace:
     for name in space.free_names:
         limits = space.parameter(name).limits
         value = float(np.clip(start.values[name], *limits))
-        space = space.with_prior(name, passed_prior(name, value, 0.0, limits, "2024"))
+        prior = passed_prior(name, value, 0.0, width_of(name), limits, "2024")
+        space = space.with_prior(name, prior)
     return space
 
 

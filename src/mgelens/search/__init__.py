@@ -4,7 +4,6 @@ from mgelens.search.model import (
     Parameter,
     ParameterSpace,
     axis_ratio_and_angle,
-    default_limits,
     derived_values,
     names_with_derived,
     shear_magnitude_and_angle,
@@ -18,7 +17,6 @@ from mgelens.search.priors import (
     WidthModifier,
     passed_prior,
     prior_from_dict,
-    width_modifier,
 )
 from mgelens.search.results import (
     PhaseResult,
@@ -53,7 +51,6 @@ __all__ = [
     "axis_ratio_and_angle",
     "collect_versions",
     "credible_interval",
-    "default_limits",
     "derived_values",
     "file_sha256",
     "input_checksums",
@@ -65,5 +62,4 @@ __all__ = [
     "run_nested",
     "shear_magnitude_and_angle",
     "weighted_quantile",
-    "width_modifier",
 ]

@@ -28,27 +28,6 @@ from mgelens.search.priors import Prior, prior_from_dict
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 
-PHYSICAL_LIMITS: dict[str, tuple[float, float]] = {
-    "ell_comps_1": (-1.0, 1.0),
-    "ell_comps_2": (-1.0, 1.0),
-    "einstein_radius": (0.0, math.inf),
-    "slope": (1.0, 3.0),
-    "effective_radius": (0.0, math.inf),
-    "sersic_index": (0.8, 5.0),
-}
-"""Default limits by the last component of a dotted name: |e| < 1 keeps q > 0, θ_E > 0,
-and the EPL deflection needs 1 < γ < 3; a Sérsic has R_e > 0 and the anchor's
-0.8 ≤ n ≤ 5. Names ending in ``coefficient`` get (0, inf).
-Everything else is unbounded. Passed priors are truncated to these limits (SPEC §8.2)."""
-
-
-def default_limits(name: str) -> tuple[float, float]:
-    """Physical limits of the parameter with dotted ``name`` (see :data:`PHYSICAL_LIMITS`)."""
-    last = name.rsplit(".", 1)[-1]
-    if last.endswith("coefficient"):
-        return 0.0, math.inf
-    return PHYSICAL_LIMITS.get(last, (-math.inf, math.inf))
-
 
 @dataclass(frozen=True)
 class Parameter:
@@ -65,8 +44,8 @@ class Parameter:
     tied_to : str or None
         Name of the free or fixed parameter whose value this one takes.
     limits : (float, float) or None
-        Physical limits used to truncate passed priors; ``None`` means
-        :func:`default_limits` of the name.
+        Limits used to truncate priors passed to this parameter; ``None`` means
+        unbounded. The model that declares the parameter sets them.
     """
 
     name: str
@@ -85,7 +64,7 @@ class Parameter:
             if not math.isfinite(self.value):
                 raise ValueError(f"{self.name}: fixed value must be finite, got {self.value}")
             object.__setattr__(self, "value", float(self.value))
-        limits = default_limits(self.name) if self.limits is None else self.limits
+        limits = (-math.inf, math.inf) if self.limits is None else self.limits
         lower, upper = float(limits[0]), float(limits[1])
         if not lower < upper:
             raise ValueError(f"{self.name}: limits must satisfy lower < upper, got {limits}")

@@ -239,38 +239,11 @@ class WidthModifier:
         return self.value if self.kind == "absolute" else self.value * abs(median)
 
 
-_CENTRE = WidthModifier("absolute", 0.05)
-_ELL_COMPS = WidthModifier("absolute", 0.2)
-_SHEAR = WidthModifier("absolute", 0.05)
-_RELATIVE_HALF = WidthModifier("relative", 0.5)
-WIDTH_MODIFIERS: dict[str, WidthModifier] = {
-    "centre_x": _CENTRE,
-    "centre_y": _CENTRE,
-    "ell_comps_1": _ELL_COMPS,
-    "ell_comps_2": _ELL_COMPS,
-    "einstein_radius": WidthModifier("relative", 0.25),
-    "slope": WidthModifier("absolute", 0.2),
-    "gamma_1": _SHEAR,
-    "gamma_2": _SHEAR,
-    "effective_radius": WidthModifier("relative", 1.0),
-    "sersic_index": WidthModifier("absolute", 1.5),
-}
-"""Width modifiers keyed by the last component of a dotted parameter name (SPEC §8.2;
-Sérsic R_e and n from the anchor's ``priors/light/linear/sersic.yaml``).
-
-Regularization coefficients (names ending in ``coefficient``) and every other parameter
-use the default, relative 0.5."""
-
-
-def width_modifier(name: str) -> WidthModifier:
-    """Width modifier of the parameter with dotted ``name`` (matched on its last component)."""
-    return WIDTH_MODIFIERS.get(name.rsplit(".", 1)[-1], _RELATIVE_HALF)
-
-
 def passed_prior(
     name: str,
     previous_median: float,
     previous_sigma: float,
+    width: WidthModifier,
     limits: tuple[float, float] = (-math.inf, math.inf),
     rule: PassingRule = "paper",
 ) -> TruncatedGaussian:
@@ -279,13 +252,14 @@ def passed_prior(
     Parameters
     ----------
     name : str
-        Dotted parameter name; its last component selects the width modifier w
-        (:data:`WIDTH_MODIFIERS`).
+        Dotted parameter name (for messages).
     previous_median : float
         Posterior median μ of the previous phase (parameter units).
     previous_sigma : float
         Half-width of the previous 3σ (99.73 %) credible interval,
         max(upper − μ, μ − lower) (parameter units); 0 for a parameter that was fixed.
+    width : WidthModifier
+        The width modifier w of the parameter, set by the model that declares it.
     limits : (float, float)
         Physical limits of the parameter; the Gaussian is truncated to them.
     rule : {"paper", "2024"}
@@ -301,8 +275,8 @@ def passed_prior(
         raise ValueError(f"rule must be 'paper' or '2024', got {rule!r}")
     if not previous_sigma >= 0.0:
         raise ValueError(f"previous_sigma must be >= 0, got {previous_sigma} for {name}")
-    width = width_modifier(name).width(previous_median)
-    sigma = max(previous_sigma, width) if rule == "paper" else width
+    modifier = width.width(previous_median)
+    sigma = max(previous_sigma, modifier) if rule == "paper" else modifier
     if not sigma > 0.0:
         raise ValueError(
             f"passed prior of {name} has zero width (median {previous_median}, "

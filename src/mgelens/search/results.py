@@ -36,7 +36,7 @@ import mgelens
 from mgelens.atomic import atomic_path, write_json
 from mgelens.provenance import code_version
 from mgelens.search.model import ParameterSpace, derived_values, names_with_derived
-from mgelens.search.priors import PassingRule, TruncatedGaussian, passed_prior
+from mgelens.search.priors import PassingRule, TruncatedGaussian, WidthModifier, passed_prior
 from mgelens.search.sampler import SIGMA_PROBABILITY, SamplerOutput, weighted_quantile
 
 RESULT_FILE = "result.json"
@@ -253,6 +253,8 @@ def passed_priors(
     names: Sequence[str],
     rule: PassingRule = "paper",
     limits: Mapping[str, tuple[float, float]] | None = None,
+    *,
+    widths: Mapping[str, WidthModifier],
 ) -> dict[str, TruncatedGaussian]:
     """Priors for ``names`` passed from a previous phase's result (SPEC §8.2).
 
@@ -270,6 +272,9 @@ def passed_priors(
     rule : {"paper", "2024"}
     limits : mapping, optional
         Per-name limits overriding those stored in ``previous.space``.
+    widths : mapping
+        Width modifier of every name (the model's, e.g.
+        :func:`mgelens.pipeline.parameters.width_of`).
 
     Returns
     -------
@@ -289,5 +294,5 @@ def passed_priors(
         lower, upper = interval[name]
         half_width = max(upper - mu, mu - lower, 0.0)
         bounds = limits.get(name, previous.space.parameter(name).limits)
-        priors[name] = passed_prior(name, mu, half_width, bounds, rule)
+        priors[name] = passed_prior(name, mu, half_width, widths[name], bounds, rule)
     return priors
