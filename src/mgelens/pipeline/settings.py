@@ -38,6 +38,7 @@ import yaml
 
 from mgelens import values
 from mgelens.search.sampler import SamplerSettings
+from mgelens.source.interpolate import INTERPOLATIONS
 from mgelens.source.mesh import EDGE_RULES
 from mgelens.source.regularization import SIGNAL_AVERAGES
 
@@ -52,7 +53,6 @@ MGE_SET_CHOICES = (2, 4, 6)
 SPIX1_REGULARIZATIONS = ("constant", "constant_split")
 KMEANS_SCHEMES = ("2023", "2024")
 CROSS_OFFSETS = ("anchor", "paper")
-INTERPOLATIONS = ("natural_neighbour", "nearest")
 PRIOR_PASSING_RULES = ("paper", "2024")
 SP_STARTS = ("prior", "search")
 
