@@ -299,7 +299,7 @@ _PAPER_SAMPLERS = {
 _QUICK = {"method": "dynesty_static", "sample": "rwalk", "dlogz": 1.0}
 _QUICK_SAMPLERS = {
     "sp": SamplerSettings(n_live=60, **_QUICK),
-    "spix1": SamplerSettings(n_live=24, **_QUICK),
+    "spix1": SamplerSettings(n_live=24, plateau_restarts=2, **_QUICK),
     "spix2": SamplerSettings(n_live=12, plateau_restarts=2, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
     "mass": SamplerSettings(method="nautilus", n_live=30, n_eff=300, f_live=0.05),
@@ -308,10 +308,11 @@ _QUICK_SAMPLERS = {
 stopping criterion; these phases hand their maximum-likelihood model on. SP, the most
 multimodal phase (17 parameters), uses 60 live points, SPix1 3 n_dim (24), SPix2 and
 LIGHT about 2 n_dim + 2 (dynesty needs more than 2 n_dim). ln ε has spikes over SPix2's
-k-means weights on which its walks can collapse, every live point a copy of one, and stop
-short of convergence: SPix2 then starts afresh with twice the live points, up to twice
-(12, 24, 48); the real samples' configs (config/slacs.yaml, config/paper.yaml) start it
-at 24. MASS, whose posterior is the result: nautilus with 30 live points per source mesh
+k-means weights, and over SPix1's mass when the lens light is unconstrained (pn-MGE), on
+which the walks can collapse, every live point a copy of one, and stop short of
+convergence: SPix1 and SPix2 then start afresh with twice the live points, up to twice
+(24, 48, 96 and 12, 24, 48); the real samples' configs (config/slacs.yaml,
+config/paper.yaml) start SPix2 at 24. MASS, whose posterior is the result: nautilus with 30 live points per source mesh
 (two meshes), stopped when the live set holds 5 % of the evidence and 300 effective
 samples are drawn. The measurements behind each choice, and
 nautilus tried for SP, are in docs/slam.md, "Quick-profile samplers"."""
