@@ -17,7 +17,7 @@ LAYERS = (
     ("search", ("search",)),
     ("pipeline", ("pipeline",)),
     ("analysis", ("simulate", "mock_light", "mock_sources", "mock_lenses",
-                  "independent_mock", "isophotes", "isophote_recovery", "recovery",
+                  "independent_mock", "ellipse_fit", "isophotes", "isophote_recovery", "recovery",
                   "coverage", "quality", "overview", "summary", "published", "mock_study",
                   "smoothness")),
     ("plot", ("plot",)),

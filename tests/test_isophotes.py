@@ -29,19 +29,21 @@ from astropy.io import fits
 from scipy import optimize
 
 from mgelens.cli import main
+from mgelens.ellipse_fit import (
+    HARMONIC_NAMES,
+    Ellipse,
+    IsophoteError,
+    fit_ellipse,
+    fit_isophote,
+    harmonic_deviations,
+)
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from, to_profile_frame
 from mgelens.grid import pixel_centres
 from mgelens.isophotes import (
     FLAG_ROUND,
-    HARMONIC_NAMES,
     TABLE_COLUMNS,
-    Ellipse,
-    IsophoteError,
     closed_contour,
     contour_generator,
-    fit_ellipse,
-    fit_isophote,
-    harmonic_deviations,
     isophote_statistics,
     isophote_table,
     mass_shape_from,

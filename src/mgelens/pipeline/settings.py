@@ -312,9 +312,9 @@ k-means weights, and over SPix1's mass when the lens light is unconstrained (pn-
 which the walks can collapse, every live point a copy of one, and stop short of
 convergence: SPix1 and SPix2 then start afresh with twice the live points, up to twice
 (24, 48, 96 and 12, 24, 48); the real samples' configs (config/slacs.yaml,
-config/paper.yaml) start SPix2 at 24. MASS, whose posterior is the result: nautilus with 30 live points per source mesh
-(two meshes), stopped when the live set holds 5 % of the evidence and 300 effective
-samples are drawn. The measurements behind each choice, and
+config/paper.yaml) start SPix2 at 24. MASS, whose posterior is the result: nautilus with
+30 live points per source mesh (two meshes), stopped when the live set holds 5 % of the
+evidence and 300 effective samples are drawn. The measurements behind each choice, and
 nautilus tried for SP, are in docs/slam.md, "Quick-profile samplers"."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(

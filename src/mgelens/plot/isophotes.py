@@ -12,12 +12,11 @@ import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from mgelens.ellipse_fit import Ellipse, IsophoteError
 from mgelens.grid import pixel_centres
 from mgelens.isophotes import (
     ROUND_AXIS_RATIO,
     STATISTICS_SMA_RANGE,
-    Ellipse,
-    IsophoteError,
     MassShape,
     closed_contour,
     contour_generator,

@@ -36,8 +36,8 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Patch
 
+from mgelens.ellipse_fit import Ellipse
 from mgelens.grid import pixel_centres
-from mgelens.isophotes import Ellipse
 from mgelens.overview import LightComponent, Overview
 
 RESIDUAL_LIMIT = 3.5
