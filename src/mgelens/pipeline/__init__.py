@@ -9,29 +9,3 @@
   its writer and its readers (the next phases, the analyses);
 * :mod:`~mgelens.pipeline.products`: ``model.fits`` and the adapt image.
 """
-
-from mgelens.pipeline.phases import limit_threads, read_phase, run_phase
-from mgelens.pipeline.records import PhaseInputError, lens_light_profiles, mass_model
-from mgelens.pipeline.settings import (
-    PHASES,
-    PROFILES,
-    SettingsError,
-    SlamSettings,
-    load_settings,
-    profile_settings,
-)
-
-__all__ = [
-    "PHASES",
-    "PROFILES",
-    "PhaseInputError",
-    "SettingsError",
-    "SlamSettings",
-    "lens_light_profiles",
-    "limit_threads",
-    "load_settings",
-    "mass_model",
-    "profile_settings",
-    "read_phase",
-    "run_phase",
-]
