@@ -48,7 +48,7 @@ from mgelens.fit import figure_of_merit, fit
 from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.pipeline import models
-from mgelens.pipeline.phases import load_dataset
+from mgelens.pipeline.problem import load_dataset
 from mgelens.pipeline.settings import profile_settings
 from mgelens.source.image_mesh import floored_adapt_image, overlay_centres
 
@@ -225,7 +225,7 @@ def run(calls: dict, n_calls: int) -> tuple[dict, dict, dict]:
 
         def call(v, dataset=dataset, model=model, passive=passive):
             """One sampler call: the lens model of the values, then the fit (as
-            :class:`mgelens.pipeline.phases.PhaseLikelihood`; SPix2's k-means included)."""
+            :class:`mgelens.pipeline.run.PhaseLikelihood`; SPix2's k-means included)."""
             return figure_of_merit(dataset, model.build(v), passive)
 
         call(values[0])  # warm-up (compiles, fills caches)

@@ -10,7 +10,7 @@ from test_pipeline import MASK_RADIUS, mock_dir  # noqa: F401  (fixture)
 
 from mgelens.cli import main
 from mgelens.imaging import ImagingError
-from mgelens.pipeline import phases
+from mgelens.pipeline import problem, run
 from mgelens.pipeline.model_choice import (
     Candidate,
     LightModel,
@@ -18,6 +18,7 @@ from mgelens.pipeline.model_choice import (
     candidates,
     choose,
 )
+from mgelens.pipeline.phases import mass as mass_phase
 from mgelens.pipeline.settings import SettingsError, settings_from_mapping
 
 
@@ -118,10 +119,10 @@ def candidate_run(mock_dir, tmp_path_factory):  # noqa: F811
     results = tmp_path_factory.mktemp("choice")
     settings = capped_settings()
     for phase in ("sp", "spix1", "spix2"):
-        phases.run_phase(phase, mock_dir, results, settings, seed=1, threads=1)
+        run.run_phase(phase, mock_dir, results, settings, seed=1, threads=1)
     models = [LightModel(2, True), LightModel(2, False)]
     for model in models:
-        phases.run_phase(
+        run.run_phase(
             "light",
             mock_dir,
             results,
@@ -169,7 +170,7 @@ def test_adopt_copies_the_chosen_candidate_and_mass_reads_it(candidate_run, mock
     for name in ("result.json", "samples.csv", "model.fits", "phase.log"):
         assert (results / "light" / name).read_bytes() == (folder / name).read_bytes()
     # MASS fixes the lens light of light/, the chosen candidate's
-    problem = phases.mass_problem(mock_dir, results, capped_settings())
+    problem = mass_phase.problem(mock_dir, results, capped_settings())
     names = {spec.name for spec in problem.model.lens_light}
     assert ("point" in names) == LightModel.from_label(chosen.label).point_set
     assert str(results / "light" / "result.json") in map(str, problem.inputs)
@@ -190,7 +191,7 @@ def test_choose_command_names_a_missing_candidate(candidate_run, tmp_path, caplo
 def test_a_phase_folder_must_be_one_name(mock_dir, tmp_path):  # noqa: F811
     for bad in ("../light", "a/b", ".."):
         with pytest.raises(ValueError, match="one folder name"):
-            phases.run_phase("sp", mock_dir, tmp_path, capped_settings(), folder_name=bad)
+            run.run_phase("sp", mock_dir, tmp_path, capped_settings(), folder_name=bad)
 
 
 # -- pixel scale from the sheet ----------------------------------------------------------
@@ -205,10 +206,10 @@ def _headerless_folder(mock_dir, folder):  # noqa: F811
 def test_a_folder_without_pixel_scale_needs_the_settings_value(mock_dir, tmp_path):  # noqa: F811
     folder = _headerless_folder(mock_dir, tmp_path / "bare")
     with pytest.raises(ImagingError, match=r"`pixel_scale` column"):
-        phases.load_dataset(folder, capped_settings(), (0.0, 0.0))
+        problem.load_dataset(folder, capped_settings(), (0.0, 0.0))
     scale = fits.getheader(mock_dir / "data.fits")["PIXSCALE"]
-    dataset, _ = phases.load_dataset(folder, capped_settings(pixel_scale=scale), (0.0, 0.0))
-    reference, _ = phases.load_dataset(mock_dir, capped_settings(), (0.0, 0.0))
+    dataset, _ = problem.load_dataset(folder, capped_settings(pixel_scale=scale), (0.0, 0.0))
+    reference, _ = problem.load_dataset(mock_dir, capped_settings(), (0.0, 0.0))
     assert dataset.imaging.pixel_scale == scale
     np.testing.assert_array_equal(dataset.mask, reference.mask)
     np.testing.assert_array_equal(dataset.data, reference.data)

@@ -30,7 +30,7 @@ from mgelens.overview import (
     overview_from_fit,
     voronoi_edges,
 )
-from mgelens.pipeline import phases
+from mgelens.pipeline import run
 from mgelens.pipeline.settings import settings_from_mapping
 from mgelens.plot.overview import (
     CONTOUR_RANGE,
@@ -248,13 +248,13 @@ def capped_run(mock_dir, tmp_path_factory):
     )
     results = tmp_path_factory.mktemp("results")
     for phase in ("sp", "spix1"):
-        phases.run_phase(phase, mock_dir, results, settings, seed=2, threads=1)
+        run.run_phase(phase, mock_dir, results, settings, seed=2, threads=1)
     return results
 
 
 def rebuilt(results, phase, mock_dir):
     result_record = PhaseResult.read(results / phase)
-    problem, values = phases.max_likelihood_problem(result_record, mock_dir, results)
+    problem, values = run.max_likelihood_problem(result_record, mock_dir, results)
     fitted = fit(problem.dataset, problem.model.build(values))
     names = [spec.name for spec in problem.model.lens_light]
     return fitted, overview_from_fit(fitted, names, problem.mask_radius, lens="M", phase=phase)

@@ -21,7 +21,12 @@ from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.isophotes import STATISTICS_SMA_RANGE, isophote_table
 from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
-from mgelens.pipeline import models, phases, products, records
+from mgelens.pipeline import models, problem, products, records, run
+from mgelens.pipeline.phases import light as light_phase
+from mgelens.pipeline.phases import mass as mass_phase
+from mgelens.pipeline.phases import sp as sp_phase
+from mgelens.pipeline.phases import spix1 as spix1_phase
+from mgelens.pipeline.phases import spix2 as spix2_phase
 from mgelens.pipeline.settings import (
     PHASES,
     SettingsError,
@@ -58,7 +63,7 @@ SP_VALUES = {
     "source.set_0.ell_comps_1": 0.1,
     "source.set_0.ell_comps_2": 0.0,
 }
-SP_FULL_VALUES = models.sp_space(SP_SPECS).values(models.sp_space(SP_SPECS).vector(SP_VALUES))
+SP_FULL_VALUES = sp_phase.space(SP_SPECS).values(sp_phase.space(SP_SPECS).vector(SP_VALUES))
 """SP_VALUES with the tied centres of ``set_1`` filled in."""
 SPIX2_VALUES = {
     "mesh.weight_floor": 0.3,
@@ -95,14 +100,14 @@ def fake_result(phase, space, centre, scale=0.01, n=400, seed=0) -> PhaseResult:
 @pytest.fixture(scope="module")
 def chain():
     """Fake SP, SPix1, SPix2 and LIGHT results (4 sets + point set)."""
-    sp = fake_result("sp", models.sp_space(SP_SPECS), SP_VALUES)
-    spix1_space = models.spix1_space(sp)
+    sp = fake_result("sp", sp_phase.space(SP_SPECS), SP_VALUES)
+    spix1_space = spix1_phase.space(sp)
     spix1 = fake_result(
         "spix1", spix1_space, {**SP_VALUES, "regularization.coefficient": 3.0}, scale=0.005
     )
-    spix2 = fake_result("spix2", models.spix2_space(sp, spix1), SPIX2_VALUES)
+    spix2 = fake_result("spix2", spix2_phase.space(sp, spix1), SPIX2_VALUES)
     specs = models.mge_specs(4, True, PIXEL, MASK_RADIUS)
-    light_space = models.light_space(specs, sp, spix1, spix2)
+    light_space = light_phase.space(specs, sp, spix1, spix2)
     light_values = {n: 0.05 for n in light_space.free_names}
     light = fake_result("light", light_space, light_values)
     return {"sp": sp, "spix1": spix1, "spix2": spix2, "light": light}
@@ -110,7 +115,7 @@ def chain():
 
 # -- parameter spaces -------------------------------------------------------------------
 def test_sp_space_has_17_parameters_and_one_shared_lens_light_centre():
-    space = models.sp_space(SP_SPECS)
+    space = sp_phase.space(SP_SPECS)
     assert space.n_free == 17
     assert space.parameter("lens_light.set_1.centre_x").tied_to == "lens_light.set_0.centre_x"
     assert space.parameter("lens_light.set_1.centre_y").tied_to == "lens_light.set_0.centre_y"
@@ -125,9 +130,9 @@ def test_sp_space_has_17_parameters_and_one_shared_lens_light_centre():
 
 
 def test_phase_spaces_have_the_papers_free_parameter_counts(chain):
-    assert models.spix1_space(chain["sp"]).n_free == 8
-    assert models.spix2_space(chain["sp"], chain["spix1"]).n_free == 5
-    assert models.mass_space(chain["light"], chain["spix1"], chain["spix2"]).n_free == 8
+    assert spix1_phase.space(chain["sp"]).n_free == 8
+    assert spix2_phase.space(chain["sp"], chain["spix1"]).n_free == 5
+    assert mass_phase.space(chain["light"], chain["spix1"], chain["spix2"]).n_free == 8
 
 
 @pytest.mark.parametrize(
@@ -136,7 +141,7 @@ def test_phase_spaces_have_the_papers_free_parameter_counts(chain):
 )
 def test_light_space_counts(chain, n_sets, point_set, expected):
     specs = models.mge_specs(n_sets, point_set, PIXEL, MASK_RADIUS)
-    space = models.light_space(specs, chain["sp"], chain["spix1"], chain["spix2"])
+    space = light_phase.space(specs, chain["sp"], chain["spix1"], chain["spix2"])
     assert space.n_free == expected
     if point_set:
         assert specs[-1].name == "point"
@@ -146,7 +151,7 @@ def test_light_space_counts(chain, n_sets, point_set, expected):
 
 def test_light_space_priors_follow_spec_notes(chain):
     specs = models.mge_specs(4, True, PIXEL, MASK_RADIUS)
-    space = models.light_space(specs, chain["sp"], chain["spix1"], chain["spix2"])
+    space = light_phase.space(specs, chain["sp"], chain["spix1"], chain["spix2"])
     cx = chain["sp"].max_likelihood["lens_light.set_0.centre_x"]
     assert space.parameter("lens_light.set_0.centre_x").prior == Uniform(cx - 0.1, cx + 0.1)
     assert space.parameter("lens_light.point.centre_x").prior == Uniform(cx - 0.1, cx + 0.1)
@@ -158,12 +163,12 @@ def test_light_space_priors_follow_spec_notes(chain):
 
 
 def test_fixed_components_take_the_earlier_maximum_likelihood(chain):
-    spix2 = models.spix2_space(chain["sp"], chain["spix1"])
+    spix2 = spix2_phase.space(chain["sp"], chain["spix1"])
     best = chain["spix1"].max_likelihood
     for name in ("mass.einstein_radius", "mass.ell_comps_2", "shear.gamma_1"):
         assert spix2.parameter(name).value == best[name]
     assert spix2.parameter("lens_light.set_1.centre_x").tied_to == "lens_light.set_0.centre_x"
-    mass = models.mass_space(chain["light"], chain["spix1"], chain["spix2"])
+    mass = mass_phase.space(chain["light"], chain["spix1"], chain["spix2"])
     light_best = chain["light"].max_likelihood
     assert (
         mass.parameter("lens_light.point.ell_comps_1").value
@@ -193,7 +198,7 @@ SERSIC_VALUES = {
 def test_sersic_spaces_follow_the_papers_comparison_chain(chain):
     """3×Sérsic (SPEC §2.3, §8.1): SP 2 Sérsics sharing a centre (21 free), LIGHT 3 (14),
     MASS fits the Sérsics with the EPL (22), their priors passed from LIGHT."""
-    sp_space = models.sp_space(models.sersic_specs(2))
+    sp_space = sp_phase.space(models.sersic_specs(2))
     assert sp_space.n_free == 21
     tie = sp_space.parameter("lens_light.sersic_1.centre_y").tied_to
     assert tie == "lens_light.sersic_0.centre_y"
@@ -210,7 +215,7 @@ def test_sersic_spaces_follow_the_papers_comparison_chain(chain):
 
     sp = fake_result("sp", sp_space, SERSIC_VALUES)
     assert models.light_centre(sp) == pytest.approx((0.01, -0.07), abs=0.05)
-    light_space = models.light_space(models.sersic_specs(3), sp, chain["spix1"], chain["spix2"])
+    light_space = light_phase.space(models.sersic_specs(3), sp, chain["spix1"], chain["spix2"])
     assert light_space.n_free == 14
     cx = sp.max_likelihood["lens_light.sersic_0.centre_x"]
     assert light_space.parameter("lens_light.sersic_0.centre_x").prior == Uniform(
@@ -221,9 +226,9 @@ def test_sersic_spaces_follow_the_papers_comparison_chain(chain):
     light_values.update({n: 4.9 for n in light_space.free_names if n.endswith("index")})
     light = fake_result("light", light_space, light_values, scale=0.02)
 
-    fixed = models.mass_space(light, chain["spix1"], chain["spix2"])
+    fixed = mass_phase.space(light, chain["spix1"], chain["spix2"])
     assert fixed.n_free == 8
-    space = models.mass_space(light, chain["spix1"], chain["spix2"], free_lens_light=True)
+    space = mass_phase.space(light, chain["spix1"], chain["spix2"], free_lens_light=True)
     assert space.n_free == 22
     assert space.parameter("lens_light.sersic_2.centre_x").tied_to == "lens_light.sersic_0.centre_x"
     radius = space.parameter("lens_light.sersic_1.effective_radius").prior
@@ -237,7 +242,7 @@ def test_sersic_spaces_follow_the_papers_comparison_chain(chain):
 # -- prior passing ----------------------------------------------------------------------
 def test_spix1_priors_are_passed_from_sp(chain):
     sp = chain["sp"]
-    space = models.spix1_space(sp)
+    space = spix1_phase.space(sp)
     median, interval = sp.median, sp.interval(3)
     widths = {"mass.centre_x": 0.05, "mass.einstein_radius": 0.25 * median["mass.einstein_radius"]}
     for name, width in widths.items():
@@ -250,7 +255,7 @@ def test_spix1_priors_are_passed_from_sp(chain):
 
 
 def test_mass_phase_passes_sie_parameters_from_spix1_and_frees_the_slope(chain):
-    space = models.mass_space(chain["light"], chain["spix1"], chain["spix2"])
+    space = mass_phase.space(chain["light"], chain["spix1"], chain["spix2"])
     spix1 = chain["spix1"]
     prior = space.parameter("mass.ell_comps_2").prior
     assert prior.mean == pytest.approx(spix1.median["mass.ell_comps_2"])
@@ -358,7 +363,7 @@ def test_fit_settings_reach_the_fit(mock_dir):
                 "edge_rule": rule,
             }
         )
-        dataset, _ = phases.load_dataset(mock_dir, settings, (0.0, 0.0))
+        dataset, _ = problem.load_dataset(mock_dir, settings, (0.0, 0.0))
         assert dataset.settings.psf_trim == trim
         assert dataset.settings.force_edge_pixels_to_zero is force_edge
         assert dataset.settings.edge_rule == rule
@@ -455,8 +460,8 @@ def test_invalid_settings_name_the_key(section, message):
 
 def test_sampler_for_raises_dynesty_live_points_to_its_minimum():
     quick = profile_settings("quick").samplers["light"]
-    assert phases.sampler_for(quick, 14).n_live == quick.n_live == 30
-    assert phases.sampler_for(quick, 18).n_live == 38
+    assert run.sampler_for(quick, 14).n_live == quick.n_live == 30
+    assert run.sampler_for(quick, 18).n_live == 38
 
 
 # -- small mock and products ------------------------------------------------------------
@@ -496,7 +501,7 @@ def tiny_settings(**sampler):
 
 def test_model_fits_extensions_and_units(mock_dir, tmp_path):
     settings = tiny_settings()
-    problem = phases.sp_problem(mock_dir, tmp_path, settings)
+    problem = sp_phase.problem(mock_dir, tmp_path, settings)
     values = problem.space.values(problem.space.vector(SP_VALUES))
     result = fit(problem.dataset, problem.model.build(values))
     path = tmp_path / "model.fits"
@@ -526,7 +531,7 @@ def test_model_fits_extensions_and_units(mock_dir, tmp_path):
 
 
 def test_pixelized_products_and_adapt_image(mock_dir, tmp_path):
-    problem = phases.sp_problem(mock_dir, tmp_path, tiny_settings())
+    problem = sp_phase.problem(mock_dir, tmp_path, tiny_settings())
     dataset = problem.dataset
     x, y = overlay_centres(dataset.mask, PIXEL, (12, 12))
     source = models.MeshSourceModel(x, y, "constant")
@@ -543,14 +548,14 @@ def test_pixelized_products_and_adapt_image(mock_dir, tmp_path):
 
 # -- phases end to end ------------------------------------------------------------------
 def test_missing_earlier_phase_is_named(mock_dir, tmp_path):
-    with pytest.raises(phases.PhaseInputError, match=r"sp/result.json not found"):
-        phases.run_phase("spix1", mock_dir, tmp_path, tiny_settings())
+    with pytest.raises(records.PhaseInputError, match=r"sp/result.json not found"):
+        run.run_phase("spix1", mock_dir, tmp_path, tiny_settings())
 
 
 @pytest.fixture(scope="module")
 def sp_run(mock_dir, tmp_path_factory):
     results = tmp_path_factory.mktemp("results")
-    result = phases.run_phase("sp", mock_dir, results, tiny_settings(), seed=3, threads=1)
+    result = run.run_phase("sp", mock_dir, results, tiny_settings(), seed=3, threads=1)
     return results, result
 
 
@@ -590,9 +595,9 @@ def test_checkpoint_fingerprint_follows_every_input_of_the_likelihood(sp_run, mo
     results, _ = sp_run
 
     def fingerprint(settings):
-        problem = phases.PROBLEMS["spix1"](mock_dir, results, settings)
-        sampler = phases.sampler_for(settings.samplers["spix1"], problem.space.n_free)
-        return phases.checkpoint_fingerprint(problem, sampler, 0, {})
+        problem = spix1_phase.problem(mock_dir, results, settings)
+        sampler = run.sampler_for(settings.samplers["spix1"], problem.space.n_free)
+        return run.checkpoint_fingerprint(problem, sampler, 0, {})
 
     base = tiny_settings()
     assert base.positions_penalty
@@ -654,7 +659,7 @@ def test_interrupted_phase_resumes_to_the_uninterrupted_result(sp_run, mock_dir,
             "samplers": {"sp": {"n_live": 36, "dlogz": 0.5, "progress_every": 1e9}},
         }
     )
-    resumed = phases.run_phase("sp", mock_dir, results, settings, seed=3, threads=1)
+    resumed = run.run_phase("sp", mock_dir, results, settings, seed=3, threads=1)
     assert resumed.output.n_resumes == 1
     np.testing.assert_array_equal(resumed.output.samples, reference.output.samples)
     np.testing.assert_array_equal(resumed.output.log_weights, reference.output.log_weights)
@@ -751,7 +756,7 @@ def sersic_run(mock_dir, tmp_path_factory):
     results = tmp_path_factory.mktemp("sersic")
     settings = sersic_settings()
     for phase in PHASES:
-        phases.run_phase(phase, mock_dir, results, settings, seed=1, threads=1)
+        run.run_phase(phase, mock_dir, results, settings, seed=1, threads=1)
     return results
 
 
@@ -789,10 +794,10 @@ def test_a_phase_refuses_an_unconverged_earlier_phase(sersic_run, mock_dir, tmp_
     shutil.copytree(sersic_run / "sp", tmp_path / "sp")
     settings = sersic_settings(allow_unconverged=False)
     message = r"sp/result\.json is not converged \(stopped at max_iterations = 60.*allow_unconv"
-    with pytest.raises(phases.PhaseInputError, match=message):
-        phases.run_phase("spix1", mock_dir, tmp_path, settings)
+    with pytest.raises(records.PhaseInputError, match=message):
+        run.run_phase("spix1", mock_dir, tmp_path, settings)
     assert not (tmp_path / "spix1" / "result.json").exists()
-    assert phases.read_phase(tmp_path, "sp", allow_unconverged=True).result.phase == "sp"
+    assert problem.read_phase(tmp_path, "sp", allow_unconverged=True).result.phase == "sp"
 
 
 def test_sersic_chain_fixes_sps_sersics_in_the_spix_phases(sersic_run, mock_dir):
@@ -804,7 +809,7 @@ def test_sersic_chain_fixes_sps_sersics_in_the_spix_phases(sersic_run, mock_dir)
             assert fixed[key] == pytest.approx(solved[key])
     # the lens light of SPix1/SPix2 is SP's solved Sérsic light, subtracted unchanged (SP's
     # own image differs only by its over-sampling centre, the prior centre (0, 0))
-    dataset = phases.spix1_problem(mock_dir, sersic_run, sersic_settings()).dataset
+    dataset = spix1_phase.problem(mock_dir, sersic_run, sersic_settings()).dataset
     expected = dataset.light_grid.blurred_image(
         list(records.lens_light_profiles(sersic_run / "sp"))
     )
@@ -840,15 +845,15 @@ def test_adaptive_signals_setting_reaches_the_pixelized_phases(sersic_run, mock_
     values = PhaseResult.read(sersic_run / "mass").max_likelihood
     for signals in ("anchor", "weighted"):
         settings = sersic_settings(adaptive_signals=signals)
-        for problem in (phases.spix2_problem, phases.mass_problem):
-            model = problem(mock_dir, sersic_run, settings).model
+        for build in (spix2_phase.problem, mass_phase.problem):
+            model = build(mock_dir, sersic_run, settings).model
             assert model.describe()["source"]["adaptive_signals"] == signals
             assert model.build(values).source.regularization.signals == signals
 
 
 def test_sersic_and_mge_results_do_not_mix(sersic_run, mock_dir):
-    with pytest.raises(phases.PhaseInputError, match="lens_light_model = 'sersic'"):
-        phases.spix1_problem(mock_dir, sersic_run, sersic_settings(lens_light_model="mge"))
+    with pytest.raises(records.PhaseInputError, match="lens_light_model = 'sersic'"):
+        spix1_phase.problem(mock_dir, sersic_run, sersic_settings(lens_light_model="mge"))
 
 
 def test_isophotes_of_a_sersic_phase(sersic_run, mock_dir, tmp_path):
@@ -867,22 +872,22 @@ def test_nnls_warm_start_of_a_phase_changes_no_value(sersic_run, mock_dir, monke
     at the prior medians with the SIE's slope 2; the values match cold starts to rounding.
     SPix2's k-means mesh moves with its samples, so it gets no warm start."""
     settings = sersic_settings(positive_only=True)
-    spix2 = phases.spix2_problem(mock_dir, sersic_run, settings)
-    assert phases.reference_passive_set(spix2) is None
-    problem = phases.mass_problem(mock_dir, sersic_run, settings)
+    spix2 = spix2_phase.problem(mock_dir, sersic_run, settings)
+    assert run.reference_passive_set(spix2) is None
+    problem = mass_phase.problem(mock_dir, sersic_run, settings)
     slopes = []
 
     def recording_fit(dataset, model, *arguments):
         slopes.append(model.mass[0].slope)
         return fit(dataset, model, *arguments)
 
-    monkeypatch.setattr(phases, "fit", recording_fit)
-    start = phases.reference_passive_set(problem)
+    monkeypatch.setattr(run, "fit", recording_fit)
+    start = run.reference_passive_set(problem)
     assert slopes == [2.0]
     assert start.dtype == bool
     assert 0 < start.sum() < start.size
-    cold = phases.PhaseLikelihood(problem.dataset, problem.space, problem.model)
-    warm = phases.PhaseLikelihood(problem.dataset, problem.space, problem.model, None, start)
+    cold = run.PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    warm = run.PhaseLikelihood(problem.dataset, problem.space, problem.model, None, start)
     rng = np.random.default_rng(2)
     centre = problem.space.prior_transform(np.full(problem.space.n_free, 0.5))
     points = [centre] + [
@@ -920,7 +925,7 @@ def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, moc
     assert meshes[0]["median"] != meshes[1]["median"]
     # the written fit is the max-likelihood sample refitted on its own mesh
     settings = sersic_settings(kmeans_seed=holder[0]["kmeans_seed"], mass_meshes=1)
-    problem = phases.mass_problem(mock_dir, sersic_run, settings)
+    problem = mass_phase.problem(mock_dir, sersic_run, settings)
     values = problem.space.values(
         table.loc[int(np.argmax(table["log_likelihood"])), list(problem.space.free_names)].to_numpy(
             dtype=float
@@ -930,7 +935,7 @@ def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, moc
     refit = fit(problem.dataset, problem.model.build(values))
     assert refit.log_evidence == pytest.approx(written, abs=1e-6)
     other = sersic_settings(kmeans_seed=1 - holder[0]["kmeans_seed"], mass_meshes=1)
-    problem = phases.mass_problem(mock_dir, sersic_run, other)
+    problem = mass_phase.problem(mock_dir, sersic_run, other)
     elsewhere = fit(problem.dataset, problem.model.build(values))
     assert abs(elsewhere.log_evidence - written) > 1e-3
 
@@ -945,7 +950,7 @@ def test_mass_meshes_sampled_side_by_side_draw_the_same_samples(sersic_run, mock
     settings = sersic_settings()
     mass = dataclasses.replace(settings.samplers["mass"], n_processes=2)
     settings = dataclasses.replace(settings, samplers={**settings.samplers, "mass": mass})
-    phases.run_phase("mass", mock_dir, results, settings, seed=1, threads=1)
+    run.run_phase("mass", mock_dir, results, settings, seed=1, threads=1)
     side_by_side = pd.read_csv(results / "mass" / "samples.csv")
     one_process = pd.read_csv(sersic_run / "mass" / "samples.csv")
     pd.testing.assert_frame_equal(side_by_side, one_process, check_exact=True)
@@ -964,22 +969,24 @@ def test_max_likelihood_problem_rebuilds_each_phases_written_fit(sersic_run, sp_
     folders = [sersic_run / phase for phase in PHASES] + [sp_run[0] / "sp"]
     for folder in folders:
         phase = PhaseResult.read(folder)
-        problem, values = phases.max_likelihood_problem(phase, mock_dir, folder.parent)
+        problem, values = run.max_likelihood_problem(phase, mock_dir, folder.parent)
         assert problem.name == phase.phase
         written = fits.getheader(folder / records.MODEL_FILE)["LOGEVID"]
         refit = fit(problem.dataset, problem.model.build(values))
         assert refit.log_evidence == pytest.approx(written, abs=1e-6), folder
 
 
-@pytest.mark.parametrize(("run", "phase"), [("sp_run", "sp"), ("sersic_run", "mass")])
-def test_true_light_refit_scores_the_fit_against_a_fixed_lens_light(run, phase, request, mock_dir):
+@pytest.mark.parametrize(("chain", "phase"), [("sp_run", "sp"), ("sersic_run", "mass")])
+def test_true_light_refit_scores_the_fit_against_a_fixed_lens_light(
+    chain, phase, request, mock_dir
+):
     """Fixing the lens light at the phase fit's own solution re-solves the same source
     (Δχ² = Δ ln ε = 0). Any other lens light raises χ² + sᵀHs, the only ln ε terms that
     change (same mass, mesh and regularization), so Δ ln ε < 0; that minimum over the
     source is convex in the lens light's scale c, so it grows from c = 1 to 0.8 to 0."""
-    results = request.getfixturevalue(run)
+    results = request.getfixturevalue(chain)
     results = results[0] if isinstance(results, tuple) else results
-    problem, values = phases.max_likelihood_problem(
+    problem, values = run.max_likelihood_problem(
         PhaseResult.read(results / phase), mock_dir, results
     )
     model = problem.model.build(values)

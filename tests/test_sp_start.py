@@ -16,8 +16,9 @@ from mgelens.fit import FitDataset
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.mass import SIE, ExternalShear, ray_trace
-from mgelens.pipeline import models, phases, sp_start
+from mgelens.pipeline import models, run, sp_start
 from mgelens.pipeline.parameters import width_of
+from mgelens.pipeline.phases import sp as sp_phase
 from mgelens.pipeline.settings import profile_settings, settings_from_mapping
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
@@ -81,11 +82,11 @@ def mock_folder(tmp_path_factory):
 @pytest.fixture(scope="module")
 def mock_problem(mock_folder):
     settings = settings_from_mapping({"mask_radius": MASK_RADIUS})
-    return phases.sp_problem(mock_folder, mock_folder, settings)
+    return sp_phase.problem(mock_folder, mock_folder, settings)
 
 
 def _search(problem):
-    likelihood = phases.PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    likelihood = run.PhaseLikelihood(problem.dataset, problem.space, problem.model)
     return sp_start.search(
         problem.dataset, problem.space, problem.model, likelihood, problem.mask_radius
     )
@@ -115,7 +116,7 @@ def test_search_finds_the_mocks_mass_from_nothing_but_the_data(mock_problem, moc
     assert mock_start.n_calls <= sp_start.LIGHT_CALLS + sp_start.POLISH_CALLS + 50
     # the polished point beats the anchor-prior medians and the arcs' start
     space = mock_problem.space
-    likelihood = phases.PhaseLikelihood(mock_problem.dataset, space, mock_problem.model)
+    likelihood = run.PhaseLikelihood(mock_problem.dataset, space, mock_problem.model)
     medians = space.prior_transform(np.full(space.n_free, 0.5))
     x = space.vector(values)
     assert mock_start.log_posterior == pytest.approx(likelihood(x) + space.log_prior(x))
@@ -139,7 +140,7 @@ def test_started_space_passes_each_free_parameter_with_slams_width(mock_problem,
 
 def test_lens_light_alone_has_no_arcs_and_keeps_the_anchor_priors(tmp_path):
     folder = _mock_folder(tmp_path, noise_factor=3.0, with_source=False)
-    problem = phases.sp_problem(folder, folder, settings_from_mapping({"mask_radius": 2.0}))
+    problem = sp_phase.problem(folder, folder, settings_from_mapping({"mask_radius": 2.0}))
     start = _search(problem)
     assert start.values is None
     assert start.arcs is None
@@ -181,18 +182,18 @@ def test_sp_phase_samples_the_started_priors_and_reuses_its_start(
         {"mask_radius": MASK_RADIUS, "allow_unconverged": True, "sp_start": "search",
          "samplers": {"sp": {"n_live": 36, "max_calls": 200, "progress_every": 1e9}}}
     )  # fmt: skip
-    result = phases.run_phase("sp", mock_folder, tmp_path, settings)
+    result = run.run_phase("sp", mock_folder, tmp_path, settings)
     recorded = json.loads((tmp_path / "sp" / sp_start.START_FILE).read_text())
     assert recorded["start"]["values"] == pytest.approx(mock_start.values)
     theta = result.space.parameter("mass.einstein_radius").prior
     assert theta.mean == pytest.approx(mock_start.values["mass.einstein_radius"])
     assert theta.sigma == pytest.approx(0.25 * theta.mean)
     with caplog.at_level(logging.INFO, logger="mgelens.pipeline.sp_start"):
-        again = phases.run_phase("sp", mock_folder, tmp_path, settings)
+        again = run.run_phase("sp", mock_folder, tmp_path, settings)
     assert "SP start read from" in caplog.text
     assert again.space.to_dict() == result.space.to_dict()
     prior = dataclasses.replace(settings, sp_start="prior")
-    anchor = phases.run_phase("sp", mock_folder, tmp_path / "prior", prior).space
+    anchor = run.run_phase("sp", mock_folder, tmp_path / "prior", prior).space
     assert anchor.parameter("mass.einstein_radius").prior == models.EINSTEIN_RADIUS_PRIOR
     assert not (tmp_path / "prior" / "sp" / sp_start.START_FILE).exists()
 

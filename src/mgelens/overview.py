@@ -234,7 +234,7 @@ def overview_from_fit(
     ----------
     result : FitResult
         ``fit(problem.dataset, problem.model.build(values))``
-        (:func:`mgelens.pipeline.phases.max_likelihood_problem`).
+        (:func:`mgelens.pipeline.run.max_likelihood_problem`).
     component_names : sequence of str
         Names of the solved lens-light components (``spec.name`` of the phase model's
         ``lens_light``), in order.

@@ -6,7 +6,7 @@ Example::
         --out results/J0252/figures/overview.png
 
 Rebuilds the phase's maximum-likelihood fit from its ``result.json`` and the earlier
-phases' folders beside it (:func:`~mgelens.pipeline.phases.max_likelihood_problem`),
+phases' folders beside it (:func:`~mgelens.pipeline.run.max_likelihood_problem`),
 computes the tangential critical curve and caustic (SPEC §3.4) and draws data, lens
 light, source plane, normalised residuals, lens-light contours with the MGE sets' q and
 PA, and lensed source (:mod:`mgelens.plot.overview`). The PNG is written atomically.
@@ -21,8 +21,8 @@ from mgelens.fit import FitError, fit
 from mgelens.imaging import ImagingError
 from mgelens.overview import overview_from_fit
 from mgelens.pipeline.models import UnphysicalSample
-from mgelens.pipeline.phases import max_likelihood_problem
 from mgelens.pipeline.records import PhaseInputError
+from mgelens.pipeline.run import max_likelihood_problem
 from mgelens.plot import save_png
 from mgelens.plot.overview import overview_figure
 from mgelens.search.results import RESULT_FILE, PhaseResult

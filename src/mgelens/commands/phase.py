@@ -21,10 +21,12 @@ import json
 import logging
 from pathlib import Path
 
+from mgelens import threads
 from mgelens.commands import make_output_folders
 from mgelens.imaging import ImagingError
 from mgelens.memory import keep_freed_memory
-from mgelens.pipeline import phases
+from mgelens.pipeline import records
+from mgelens.pipeline.run import run_phase
 from mgelens.pipeline.settings import PHASES, PROFILES, SettingsError, load_settings
 from mgelens.search.results import RESULT_FILE
 
@@ -85,7 +87,7 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        phases.limit_threads(args.threads)
+        threads.limit_threads(args.threads)
         keep_freed_memory()
         settings = load_settings(args.config, args.profile, args.slam).with_overrides(
             mask_radius=args.mask_radius,
@@ -95,10 +97,10 @@ def run(args: argparse.Namespace) -> int:
         )
         folder = args.folder or args.phase
         make_output_folders(args.results / folder / RESULT_FILE)
-        phases.run_phase(
+        run_phase(
             args.phase, args.lens_dir, args.results, settings, seed=args.seed, folder_name=folder
         )
-    except (SettingsError, ImagingError, phases.PhaseInputError, ValueError, OSError) as error:
+    except (SettingsError, ImagingError, records.PhaseInputError, ValueError, OSError) as error:
         logger.error("phase %s: %s", args.phase, error)
         return 1
     return 0

@@ -47,8 +47,8 @@ from mgelens.isophote_recovery import (
 )
 from mgelens.isophotes import TABLE_COLUMNS, isophote_table
 from mgelens.mask import circular
-from mgelens.pipeline.phases import max_likelihood_problem
 from mgelens.pipeline.records import MODEL_FILE
+from mgelens.pipeline.run import max_likelihood_problem
 from mgelens.plot import save_png
 from mgelens.plot.isophote_recovery import isophote_recovery_figure
 from mgelens.recovery import (

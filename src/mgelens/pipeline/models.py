@@ -31,8 +31,8 @@ from scipy import optimize
 from mgelens.fit import LensModel, MGESource, PixelizedSource
 from mgelens.light import MGESet, Sersic, log_spaced_sigmas
 from mgelens.mass import EPL, SIE, SLOPE_RANGE, ExternalShear, ray_trace
-from mgelens.pipeline.parameters import lens_parameter, passed
-from mgelens.search.model import Parameter, ParameterSpace
+from mgelens.pipeline.parameters import lens_parameter
+from mgelens.search.model import Parameter
 from mgelens.search.priors import Gaussian, LogUniform, Prior, TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult
 from mgelens.source.image_mesh import kmeans_centres, kmeans_weights
@@ -156,7 +156,9 @@ def mge_specs(
     return tuple(specs)
 
 
-def _geometry(prefix: str, centre: Sequence[Prior], ell_comps: Sequence[Prior]) -> list[Parameter]:
+def geometry_parameters(
+    prefix: str, centre: Sequence[Prior], ell_comps: Sequence[Prior]
+) -> list[Parameter]:
     names = ("centre_x", "centre_y", "ell_comps_1", "ell_comps_2")
     priors = (*centre, *ell_comps)
     return [lens_parameter(f"{prefix}.{n}", prior=p) for n, p in zip(names, priors, strict=True)]
@@ -177,9 +179,9 @@ def lens_light_parameters(
     first = None
     for spec in specs:
         if spec.name == "point":
-            parameters += _geometry(spec.prefix, point_centre, (point_ell_comps,) * 2)
+            parameters += geometry_parameters(spec.prefix, point_centre, (point_ell_comps,) * 2)
             continue
-        geometry = _geometry(spec.prefix, centre, (ell_comps,) * 2)
+        geometry = geometry_parameters(spec.prefix, centre, (ell_comps,) * 2)
         if isinstance(spec, SersicSpec):
             geometry += [
                 lens_parameter(f"{spec.prefix}.{n}", prior=p) for n, p in SERSIC_PRIORS.items()
@@ -542,48 +544,8 @@ def frozen_component(previous: PhaseResult, component: str) -> list[Parameter]:
     ]
 
 
-def _free(priors: Mapping[str, Prior]) -> list[Parameter]:
+def free_parameters(priors: Mapping[str, Prior]) -> list[Parameter]:
     return [lens_parameter(name, prior=prior) for name, prior in priors.items()]
-
-
-def sp_space(
-    specs: Sequence[LightSpec], centre: tuple[float, float] = (0.0, 0.0)
-) -> ParameterSpace:
-    """SP: lens light (shared centre N(c, 0.3″), ell_comps N(0, 0.3)), SIE + shear,
-    1×20 source MGE (centre N(c, 0.3″)): 6 + 7 + 4 = 17 free parameters for 2 MGE sets,
-    10 + 7 + 4 = 21 for 2 Sérsics."""
-    wide = (Gaussian(centre[0], 0.3), Gaussian(centre[1], 0.3))
-    light = lens_light_parameters(specs, wide, ELL_COMPS_PRIOR)
-    source = _geometry(f"{SOURCE}.set_0", wide, (ELL_COMPS_PRIOR,) * 2)
-    return ParameterSpace((*light, *_free(sp_mass_priors(centre)), *source))
-
-
-def spix1_space(sp: PhaseResult, rule: str = "paper") -> ParameterSpace:
-    """SPix1: lens light fixed at SP's max-L, SIE + shear passed from SP, one regularization
-    coefficient (Constant or ConstantSplit) LogUniform(1e−6, 1e6): 8 free parameters."""
-    mass = passed(sp, PASSED_MASS_NAMES, rule)
-    coefficient = {"regularization.coefficient": COEFFICIENT_PRIOR}
-    return ParameterSpace((*frozen_component(sp, LENS_LIGHT), *_free(mass), *_free(coefficient)))
-
-
-def spix2_space(sp: PhaseResult, spix1: PhaseResult) -> ParameterSpace:
-    """SPix2: lens light fixed (SP), mass fixed (SPix1); W_floor U(0, 1), p U(0, 20),
-    λ_in, λ_out LogUniform(1e−6, 1e6), κ_s U(0, 1): 5 free parameters."""
-    hyper = {
-        "mesh.weight_floor": Uniform(0.0, 1.0),
-        "mesh.weight_power": Uniform(0.0, 20.0),
-        "regularization.inner_coefficient": COEFFICIENT_PRIOR,
-        "regularization.outer_coefficient": COEFFICIENT_PRIOR,
-        "regularization.signal_scale": Uniform(0.0, 1.0),
-    }
-    return ParameterSpace(
-        (
-            *frozen_component(sp, LENS_LIGHT),
-            *frozen_component(spix1, MASS),
-            *frozen_component(spix1, SHEAR),
-            *_free(hyper),
-        )
-    )
 
 
 def light_centre(result: PhaseResult) -> tuple[float, float]:
@@ -596,67 +558,3 @@ def light_centre(result: PhaseResult) -> tuple[float, float]:
         if n.startswith(LENS_LIGHT + ".") and n.endswith(".centre_x")
     )
     return values[f"{first}.centre_x"], values[f"{first}.centre_y"]
-
-
-def light_space(
-    specs: Sequence[LightSpec], sp: PhaseResult, spix1: PhaseResult, spix2: PhaseResult
-) -> ParameterSpace:
-    """LIGHT: refit with centres U(c_SP ± 0.1″), extended ell_comps U(−0.7, 0.7),
-    point-set ell_comps N(0, 0.3) on [−1, 1]; mass fixed (SPix1), source fixed (SPix2):
-    2 + 2 N_sets (+ 4 with the point set) free parameters for the MGE, 2 + 4 N for N
-    Sérsics (R_e U(0, 30″), n U(0.8, 5))."""
-    cx, cy = light_centre(sp)
-    h = LIGHT_PHASE_CENTRE_HALF_WIDTH
-    centre = (Uniform(cx - h, cx + h), Uniform(cy - h, cy + h))
-    light = lens_light_parameters(specs, centre, LIGHT_PHASE_ELL_COMPS_PRIOR, centre)
-    return ParameterSpace(
-        (
-            *light,
-            *frozen_component(spix1, MASS),
-            *frozen_component(spix1, SHEAR),
-            *frozen_component(spix2, MESH),
-            *frozen_component(spix2, REGULARIZATION),
-        )
-    )
-
-
-def passed_component(previous: PhaseResult, component: str, rule: str = "paper") -> list[Parameter]:
-    """Parameters of ``component`` with priors passed from ``previous`` (SPEC §8.2); its
-    fixed values and ties are kept."""
-    own = [p for p in previous.space.parameters if p.name.startswith(component + ".")]
-    priors = passed(previous, [p.name for p in own if p.prior is not None], rule)
-    return [
-        Parameter(p.name, prior=priors[p.name], limits=p.limits) if p.name in priors else p
-        for p in own
-    ]
-
-
-def mass_space(
-    light: PhaseResult,
-    spix1: PhaseResult,
-    spix2: PhaseResult,
-    rule: str = "paper",
-    free_lens_light: bool = False,
-) -> ParameterSpace:
-    """MASS: lens light fixed (LIGHT), EPL + shear with centre, ell_comps, θ_E and shear
-    passed from SPix1 and γ U(1.5, 3.0), source fixed (SPix2): 8 free parameters.
-
-    With ``free_lens_light`` (the 3×Sérsic chain) the lens light is fitted together with
-    the mass, its priors passed from LIGHT: 8 + 14 free parameters for 3 Sérsics.
-    """
-    from_spix1 = passed(spix1, PASSED_MASS_NAMES, rule)
-    mass = {n: p for n, p in from_spix1.items() if n.startswith(MASS + ".")}
-    shear = {n: p for n, p in from_spix1.items() if n.startswith(SHEAR + ".")}
-    lens_light = (
-        passed_component(light, LENS_LIGHT, rule)
-        if free_lens_light
-        else frozen_component(light, LENS_LIGHT)
-    )
-    return ParameterSpace(
-        (
-            *lens_light,
-            *_free({**mass, "mass.slope": SLOPE_PRIOR, **shear}),
-            *frozen_component(spix2, MESH),
-            *frozen_component(spix2, REGULARIZATION),
-        )
-    )

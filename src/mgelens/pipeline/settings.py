@@ -107,11 +107,11 @@ class SlamSettings:
     mass_meshes : int
         Source-mesh realisations of the MASS phase (k-means seeds ``kmeans_seed`` onwards,
         SPix2's hyper-parameters in each): one nested-sampling run per mesh, the
-        posteriors pooled with equal weights (:func:`mgelens.pipeline.phases.chain_settings`).
+        posteriors pooled with equal weights (:func:`mgelens.pipeline.run.chain_settings`).
         1 (paper) samples SPix2's own mesh only, and the posterior is then conditional on
         where k-means put its centres. With ``samplers: mass: n_processes`` ≥ 2 the runs
         go side by side, one process each, with the one-process samples
-        (:func:`mgelens.pipeline.phases._sample_runs`).
+        (:func:`mgelens.pipeline.run._sample_runs`).
     interpolation : {"natural_neighbour", "nearest"}
         Source-plane interpolation.
     cross_offset : {"anchor", "paper"}
@@ -153,7 +153,7 @@ class SlamSettings:
     allow_unconverged : bool
         Let a phase build on an earlier phase whose sampler did not converge (its
         ``result.json`` says ``converged: false``, e.g. capped by ``max_calls``). Off, such a
-        phase stops with a message naming the file (:func:`mgelens.pipeline.phases.read_phase`);
+        phase stops with a message naming the file (:func:`mgelens.pipeline.problem.read_phase`);
         on, for smoke tests of the plumbing.
     samplers : mapping of phase name to SamplerSettings
         The non-linear search of each phase.

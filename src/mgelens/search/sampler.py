@@ -62,7 +62,7 @@ LOGGER = logging.getLogger("mgelens.search")
 METHODS = ("dynesty_static", "dynesty_dynamic", "nautilus")
 SPAWN = multiprocessing.get_context("spawn")
 """Process context of every worker pool (the likelihood pool here, MASS's side-by-side
-mesh runs in :mod:`mgelens.pipeline.phases`): spawned workers, set up by
+mesh runs in :mod:`mgelens.pipeline.run`): spawned workers, set up by
 :func:`prepare_worker_process`."""
 _STATE_ATTRIBUTE = "mgelens_state"
 
@@ -406,7 +406,7 @@ def pool_runs(outputs: Sequence[SamplerOutput]) -> SamplerOutput:
     The pooled posterior is the equal-weight mixture of the runs' posteriors: every run's
     weights are normalised to 1/K of the total (K runs), so that each counts the same
     whatever its evidence. This is how the MASS phase marginalises over the k-means
-    realisation of the source mesh (:func:`mgelens.pipeline.phases.chain_settings`): two
+    realisation of the source mesh (:func:`mgelens.pipeline.run.chain_settings`): two
     meshes are two discretisations of one source, and the difference in their ln Z is
     discretisation error, not evidence for either. Samples are concatenated run by run.
 

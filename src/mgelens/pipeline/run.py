@@ -1,5 +1,5 @@
-"""The five SLaM phases (SPEC §8.1) as functions: lens folder + earlier phase folders in,
-one phase folder out.
+"""Running a SLaM phase (SPEC §8.1): lens folder + earlier phase folders in, one phase
+folder out. The phases themselves are :mod:`mgelens.pipeline.phases`.
 
 ``run_phase(name, lens_dir, results_dir, settings)`` fits phase ``name`` ("sp", "spix1",
 "spix2", "light", "mass") to the imaging in ``lens_dir`` (``data.fits``,
@@ -34,41 +34,23 @@ fixed, EPL + shear). With ``lens_light_model: sersic`` the lens light is the pap
 SPix1 and SPix2, 3 Sérsics in LIGHT, Sérsics and EPL + shear together in MASS.
 """
 
-import contextlib
 import dataclasses
-import functools
 import hashlib
 import json
 import logging
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from mgelens import mask as mask_module
 from mgelens.atomic import atomic_path, write_json
-from mgelens.fit import (
-    FitDataset,
-    FitError,
-    FitResult,
-    FitSettings,
-    MGESource,
-    figure_of_merit,
-    fit,
-)
+from mgelens.fit import FitDataset, FitError, FitResult, MGESource, figure_of_merit, fit
 from mgelens.grid import pixel_centres
-from mgelens.imaging import DATA_FILE, INFO_FILE, MASK_FILE, Imaging
+from mgelens.imaging import DATA_FILE
 from mgelens.pipeline import fittable, models, products, sp_start
-from mgelens.pipeline.records import (
-    ADAPT_IMAGE_FILE,
-    MODEL_FILE,
-    PhaseInputError,
-    fit_record,
-    light_components,
-    profiles_from_record,
-    read_fit_record,
-)
+from mgelens.pipeline.phases import light, mass, sp, spix1, spix2
+from mgelens.pipeline.problem import PhaseProblem, phase_log
+from mgelens.pipeline.records import ADAPT_IMAGE_FILE, MODEL_FILE, fit_record
 from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
 from mgelens.provenance import command_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -82,192 +64,12 @@ from mgelens.search.sampler import (
     prepare_worker_process,
     run_nested,
 )
-from mgelens.source.image_mesh import overlay_centres
 from mgelens.threads import limit_threads
 
 logger = logging.getLogger("mgelens.pipeline")
 
-LOG_FILE = "phase.log"
+
 CHECKPOINT_PREFIX = "checkpoint-"
-IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", MASK_FILE, INFO_FILE)
-
-
-# -- logging ----------------------------------------------------------------
-@contextlib.contextmanager
-def _phase_log(folder: Path) -> Iterator[None]:
-    """Copy ``mgelens`` log records of INFO and above into ``folder/phase.log``."""
-    handler = logging.FileHandler(folder / LOG_FILE)
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
-    handler.setLevel(logging.INFO)
-    package = logging.getLogger("mgelens")
-    level = package.level
-    if package.getEffectiveLevel() > logging.INFO:
-        package.setLevel(logging.INFO)
-    package.addHandler(handler)
-    try:
-        yield
-    finally:
-        package.removeHandler(handler)
-        package.setLevel(level)
-        handler.close()
-
-
-# -- inputs -----------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class EarlierPhase:
-    """A finished phase read from its folder: result and maximum-likelihood fit record."""
-
-    folder: Path
-    result: PhaseResult
-    record: dict
-
-    @property
-    def files(self) -> list[Path]:
-        return [self.folder / RESULT_FILE, self.folder / SAMPLES_FILE]
-
-    @property
-    def lens_light_kind(self) -> str:
-        """ "mge" or "sersic": the kind of the phase's lens light."""
-        components = light_components(self.record)
-        return "sersic" if any(c["kind"] == "sersic" for c in components) else "mge"
-
-    @property
-    def lens_light_specs(self) -> tuple[models.LightSpec, ...]:
-        """Specs of the phase's linear (solved) lens light."""
-        return tuple(
-            models.SersicSpec(c["name"])
-            if c["kind"] == "sersic"
-            else models.LightSetSpec(c["name"], np.asarray(c["sigmas"], dtype=float))
-            for c in light_components(self.record)
-            if not c.get("fixed", False)
-        )
-
-    def check_lens_light(self, settings: SlamSettings) -> None:
-        """Raise :class:`PhaseInputError` unless the phase used the settings' lens light."""
-        if self.lens_light_kind != settings.lens_light_model:
-            raise PhaseInputError(
-                f"{self.folder / RESULT_FILE} was fitted with lens_light_model = "
-                f"{self.lens_light_kind!r} but the settings ask for "
-                f"{settings.lens_light_model!r}: rerun phase {self.folder.name!r} (and the "
-                "phases after it) with these settings"
-            )
-
-
-def read_phase(results_dir: str | Path, name: str, allow_unconverged: bool = False) -> EarlierPhase:
-    """The finished phase ``name`` in ``results_dir``.
-
-    Raises
-    ------
-    PhaseInputError
-        If its ``result.json`` is missing, naming the command that makes it, or records a
-        sampler that did not converge (unless ``allow_unconverged``,
-        ``slam.allow_unconverged``).
-    """
-    folder = Path(results_dir) / name
-    if not (folder / RESULT_FILE).is_file():
-        raise PhaseInputError(
-            f"{folder / RESULT_FILE} not found: run phase {name!r} first "
-            f"(mgelens phase {name} --results {results_dir} ...)"
-        )
-    record = read_fit_record(folder)
-    result = PhaseResult.read(folder)
-    if not (result.output.converged or allow_unconverged):
-        raise PhaseInputError(
-            f"{folder / RESULT_FILE} is not converged ({result.output.stop_reason}): rerun "
-            f"phase {name!r} without the cap or with more live points, or set "
-            "slam.allow_unconverged: true to build on it anyway"
-        )
-    return EarlierPhase(folder, result, record)
-
-
-def earlier_phases(
-    results_dir: str | Path, settings: SlamSettings, *names: str
-) -> tuple[EarlierPhase, ...]:
-    """The finished phases ``names`` (:func:`read_phase` with the settings'
-    ``allow_unconverged``)."""
-    return tuple(read_phase(results_dir, name, settings.allow_unconverged) for name in names)
-
-
-def resolve_mask_radius(lens_dir: Path, settings: SlamSettings) -> float:
-    """Mask radius (arcsec): the settings' value, else ``mask_radius`` of ``truth.json``."""
-    if settings.mask_radius is not None:
-        return float(settings.mask_radius)
-    truth = lens_dir / "truth.json"
-    if truth.is_file():
-        radius = json.loads(truth.read_text()).get("mask_radius")
-        if radius is not None:
-            return float(radius)
-    raise PhaseInputError(
-        f"no mask radius for {lens_dir}: pass --mask-radius, set slam.mask_radius in the "
-        "config, or give the folder a truth.json with mask_radius"
-    )
-
-
-def load_dataset(
-    lens_dir: Path, settings: SlamSettings, light_centre: tuple[float, float]
-) -> tuple[FitDataset, float]:
-    """Imaging of ``lens_dir`` in the circular mask of the settings, and the mask radius.
-
-    A ``mask.fits`` in the folder is combined with the circle (a pixel is used only if
-    both use it); only the pixels used must hold finite data and a positive noise.
-    ``light_centre`` (arcsec) is where light profiles are over-sampled.
-
-    Raises
-    ------
-    ImagingError
-        Naming ``data.fits``, for a circle reaching beyond the image or data without
-        light inside it (:mod:`mgelens.pipeline.fittable`), and for unreadable or invalid
-        files (:class:`~mgelens.imaging.Imaging`).
-    """
-    radius = resolve_mask_radius(lens_dir, settings)
-    data_file = lens_dir / DATA_FILE
-    circle = functools.partial(_fit_circle, data_file, radius, settings.mask_centre)
-    imaging = Imaging.from_folder(lens_dir, pixel_scale=settings.pixel_scale, mask_from=circle)
-    mask = imaging.mask
-    fittable.check_signal(data_file, imaging, mask, radius)
-    fit_settings = FitSettings(
-        positive_only=settings.positive_only,
-        sub_size=settings.sub_size,
-        lp_sub_size=settings.lp_sub_size,
-        lp_sub_size_centre=settings.lp_sub_size_centre,
-        lp_centre_radius=settings.lp_centre_radius,
-        use_border=settings.use_border,
-        force_edge_pixels_to_zero=settings.force_edge_pixels_to_zero,
-        edge_rule=settings.edge_rule,
-        psf_trim=settings.psf_trim,
-    )
-    return FitDataset.from_imaging(imaging, mask, fit_settings, light_centre), radius
-
-
-def _fit_circle(
-    data_file: Path,
-    radius: float,
-    centre: tuple[float, float],
-    shape: tuple[int, int],
-    pixel_scale: float,
-) -> np.ndarray:
-    """The fit's circular mask on an image of ``shape`` (True = excluded), refused if it
-    reaches beyond the image."""
-    fittable.check_circle_inside(data_file, shape, pixel_scale, radius, centre)
-    return mask_module.circular(shape, pixel_scale, radius, centre)
-
-
-def _imaging_files(lens_dir: Path) -> list[Path]:
-    return [lens_dir / f for f in IMAGING_FILES if (lens_dir / f).is_file()]
-
-
-# -- one phase ---------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class PhaseProblem:
-    """Everything a phase samples: data, parameter space, model mapping, input files."""
-
-    name: str
-    dataset: FitDataset
-    space: ParameterSpace
-    model: models.PhaseModel
-    inputs: tuple[Path, ...]
-    mask_radius: float
-    positions: models.PositionsPenalty | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -425,7 +227,7 @@ def _sample_alone(
     (:func:`~mgelens.search.sampler.prepare_worker_process`), its progress lines appended
     to the phase log."""
     prepare_worker_process()
-    with _phase_log(folder):
+    with phase_log(folder):
         return run_nested(likelihood, space, sampler, checkpoint, seed, logger.info)
 
 
@@ -600,169 +402,27 @@ def image_positions(result: FitResult, settings: SlamSettings) -> models.Positio
     return models.PositionsPenalty(positions, threshold)
 
 
-def positions_penalty(sp: EarlierPhase, settings: SlamSettings) -> models.PositionsPenalty | None:
-    """The positions penalty from SP's result if the settings ask for it (and SP found at
-    least two images), else ``None``."""
-    if not settings.positions_penalty:
-        return None
-    record = sp.record.get("positions") or {"positions": []}
-    positions = np.asarray(record["positions"], dtype=float).reshape(-1, 2)
-    if len(positions) < 2:
-        logger.warning(
-            "SP found %d image(s) of its source centre: no positions penalty", len(positions)
-        )
-        return None
-    logger.info(
-        "positions penalty: %d images, threshold %.3g arcsec", len(positions), record["threshold"]
-    )
-    return models.PositionsPenalty(positions, float(record["threshold"]))
+def build_problem(
+    name: str, lens_dir: Path, results_dir: Path, settings: SlamSettings
+) -> PhaseProblem:
+    """The problem of phase ``name`` (:mod:`mgelens.pipeline.phases`).
 
-
-# -- the five problems -------------------------------------------------------------------
-def sp_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
-    """SP: 2×30 MGE lens light (or 2 Sérsics), SIE + shear, 1×20 MGE source (17 or 21)."""
-    del results_dir  # the first phase reads no earlier result
-    dataset, radius = load_dataset(lens_dir, settings, settings.mask_centre)
-    specs = (
-        models.sersic_specs(2)
-        if settings.lens_light_model == "sersic"
-        else models.mge_specs(2, False, dataset.imaging.pixel_scale, radius)
-    )
-    return PhaseProblem(
-        "sp",
-        dataset,
-        models.sp_space(specs, settings.mask_centre),
-        models.PhaseModel(specs, models.MGESourceModel()),
-        tuple(_imaging_files(lens_dir)),
-        radius,
-    )
-
-
-def sp_light_model(sp: EarlierPhase, source: models.SourceModel) -> models.PhaseModel:
-    """SPix1/SPix2 model: SP's MGE geometry with intensities re-solved, or SP's Sérsics
-    fixed entirely (intensities included, SPEC §8.1)."""
-    if sp.lens_light_kind == "sersic":
-        return models.PhaseModel((), source, fixed_light=profiles_from_record(sp.record))
-    return models.PhaseModel(sp.lens_light_specs, source)
-
-
-def spix1_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
-    """SPix1: lens light fixed (SP), SIE + shear passed from SP, overlay mesh (8)."""
-    (sp,) = earlier_phases(results_dir, settings, "sp")
-    sp.check_lens_light(settings)
-    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
-    x, y = overlay_centres(dataset.mask, dataset.imaging.pixel_scale, settings.overlay_shape)
-    source = models.MeshSourceModel(
-        x, y, settings.spix1_regularization, settings.interpolation, settings.cross_offset
-    )
-    return PhaseProblem(
-        "spix1",
-        dataset,
-        models.spix1_space(sp.result, settings.prior_passing),
-        sp_light_model(sp, source),
-        (*_imaging_files(lens_dir), *sp.files),
-        radius,
-        positions_penalty(sp, settings),
-    )
-
-
-def _kmeans_source(
-    dataset: FitDataset, results_dir: Path, settings: SlamSettings
-) -> tuple[models.KMeansSourceModel, Path]:
-    path = Path(results_dir) / "spix1" / ADAPT_IMAGE_FILE
-    if not path.is_file():
-        raise PhaseInputError(f"{path} not found: rerun phase 'spix1'")
-    adapt = products.read_adapt_image(path, dataset.mask)
-    x, y = dataset.pixel_centres
-    source = models.KMeansSourceModel(
-        x,
-        y,
-        adapt,
-        settings.source_pixels,
-        settings.kmeans_seed,
-        settings.kmeans_scheme,
-        settings.interpolation,
-        settings.cross_offset,
-        settings.adaptive_signals,
-    )
-    return source, path
-
-
-def spix2_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
-    """SPix2: lens light (SP) and mass (SPix1) fixed, k-means mesh + AdaptiveBrightnessSplit
-    hyper-parameters free (5)."""
-    sp, spix1 = earlier_phases(results_dir, settings, "sp", "spix1")
-    sp.check_lens_light(settings)
-    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
-    source, adapt_path = _kmeans_source(dataset, results_dir, settings)
-    return PhaseProblem(
-        "spix2",
-        dataset,
-        models.spix2_space(sp.result, spix1.result),
-        sp_light_model(sp, source),
-        (*_imaging_files(lens_dir), *sp.files, *spix1.files, adapt_path),
-        radius,
-    )
-
-
-def light_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
-    """LIGHT: MGE refit (N×30 + point set) or 3 Sérsics, mass (SPix1) and source (SPix2)
-    fixed."""
-    sp, spix1, spix2 = earlier_phases(results_dir, settings, "sp", "spix1", "spix2")
-    sp.check_lens_light(settings)
-    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
-    kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
-    source = kmeans.fixed(spix2.result.max_likelihood)
-    specs = (
-        models.sersic_specs(3)
-        if settings.lens_light_model == "sersic"
-        else models.mge_specs(
-            settings.mge_sets, settings.point_set, dataset.imaging.pixel_scale, radius
-        )
-    )
-    return PhaseProblem(
-        "light",
-        dataset,
-        models.light_space(specs, sp.result, spix1.result, spix2.result),
-        models.PhaseModel(specs, source),
-        (*_imaging_files(lens_dir), *sp.files, *spix1.files, *spix2.files, adapt_path),
-        radius,
-    )
-
-
-def mass_problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
-    """MASS: lens light (LIGHT) and source (SPix2) fixed, EPL + shear (8); the 3×Sérsic
-    chain fits LIGHT's Sérsics together with the mass (22)."""
-    sp, spix1, spix2, light = earlier_phases(results_dir, settings, "sp", "spix1", "spix2", "light")
-    light.check_lens_light(settings)
-    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(light.result))
-    kmeans, adapt_path = _kmeans_source(dataset, results_dir, settings)
-    source = kmeans.fixed(spix2.result.max_likelihood)
-    earlier = (*sp.files, *spix1.files, *spix2.files, *light.files, adapt_path)
-    return PhaseProblem(
-        "mass",
-        dataset,
-        models.mass_space(
-            light.result,
-            spix1.result,
-            spix2.result,
-            settings.prior_passing,
-            free_lens_light=light.lens_light_kind == "sersic",
-        ),
-        models.PhaseModel(light.lens_light_specs, source),
-        (*_imaging_files(lens_dir), *earlier),
-        radius,
-        positions_penalty(sp, settings),
-    )
-
-
-PROBLEMS = {
-    "sp": sp_problem,
-    "spix1": spix1_problem,
-    "spix2": spix2_problem,
-    "light": light_problem,
-    "mass": mass_problem,
-}
+    Raises
+    ------
+    ValueError
+        For an unknown phase name.
+    """
+    if name == "sp":
+        return sp.problem(lens_dir, results_dir, settings)
+    if name == "spix1":
+        return spix1.problem(lens_dir, results_dir, settings)
+    if name == "spix2":
+        return spix2.problem(lens_dir, results_dir, settings)
+    if name == "light":
+        return light.problem(lens_dir, results_dir, settings)
+    if name == "mass":
+        return mass.problem(lens_dir, results_dir, settings)
+    raise ValueError(f"unknown phase {name!r}; phases are {list(PHASES)}")
 
 
 def run_phase(
@@ -798,7 +458,7 @@ def run_phase(
     -------
     PhaseResult
     """
-    if name not in PROBLEMS:
+    if name not in PHASES:
         raise ValueError(f"unknown phase {name!r}; phases are {list(PHASES)}")
     if folder_name is not None and (
         Path(folder_name).name != folder_name or folder_name in ("", ".", "..")
@@ -809,9 +469,9 @@ def run_phase(
     lens_dir, results_dir = Path(lens_dir), Path(results_dir)
     folder = results_dir / (folder_name or name)
     folder.mkdir(parents=True, exist_ok=True)
-    with _phase_log(folder):
+    with phase_log(folder):
         runs = chain_settings(name, settings)
-        problems = [PROBLEMS[name](lens_dir, results_dir, s) for s in runs]
+        problems = [build_problem(name, lens_dir, results_dir, s) for s in runs]
         first = problems[0]
         fittable.check_pixels_per_parameter(
             lens_dir / DATA_FILE,
@@ -864,7 +524,6 @@ def chain_settings(name: str, settings: SlamSettings) -> list[SlamSettings]:
     ]
 
 
-# -- reading results back ----------------------------------------------------------------
 def max_likelihood_problem(
     phase: PhaseResult, lens_dir: str | Path, results_dir: str | Path
 ) -> tuple[PhaseProblem, dict[str, float]]:
@@ -880,6 +539,6 @@ def max_likelihood_problem(
     best = [mesh for mesh in phase.settings.get("meshes", []) if mesh["holds_max_likelihood"]]
     if best:
         settings = dataclasses.replace(settings, kmeans_seed=int(best[0]["kmeans_seed"]))
-    problem = PROBLEMS[phase.phase](Path(lens_dir), Path(results_dir), settings)
+    problem = build_problem(phase.phase, Path(lens_dir), Path(results_dir), settings)
     values = problem.space.values(problem.space.vector(phase.max_likelihood))
     return problem, values

@@ -1,0 +1,56 @@
+"""Phase SPix2 (SPEC §8.1): lens light (SP) and mass (SPix1) fixed; the k-means source
+mesh and AdaptiveBrightnessSplit regularization hyper-parameters free: 5 free
+parameters."""
+
+from pathlib import Path
+
+from mgelens.pipeline import models
+from mgelens.pipeline.problem import (
+    PhaseProblem,
+    earlier_phases,
+    imaging_files,
+    kmeans_source,
+    load_dataset,
+    sp_light_model,
+)
+from mgelens.pipeline.settings import SlamSettings
+from mgelens.search.model import ParameterSpace
+from mgelens.search.priors import Uniform
+from mgelens.search.results import PhaseResult
+
+
+def space(sp: PhaseResult, spix1: PhaseResult) -> ParameterSpace:
+    """SPix2: lens light fixed (SP), mass fixed (SPix1); W_floor U(0, 1), p U(0, 20),
+    λ_in, λ_out LogUniform(1e−6, 1e6), κ_s U(0, 1): 5 free parameters."""
+    hyper = {
+        "mesh.weight_floor": Uniform(0.0, 1.0),
+        "mesh.weight_power": Uniform(0.0, 20.0),
+        "regularization.inner_coefficient": models.COEFFICIENT_PRIOR,
+        "regularization.outer_coefficient": models.COEFFICIENT_PRIOR,
+        "regularization.signal_scale": Uniform(0.0, 1.0),
+    }
+    return ParameterSpace(
+        (
+            *models.frozen_component(sp, models.LENS_LIGHT),
+            *models.frozen_component(spix1, models.MASS),
+            *models.frozen_component(spix1, models.SHEAR),
+            *models.free_parameters(hyper),
+        )
+    )
+
+
+def problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+    """SPix2: lens light (SP) and mass (SPix1) fixed, k-means mesh + AdaptiveBrightnessSplit
+    hyper-parameters free (5)."""
+    sp, spix1 = earlier_phases(results_dir, settings, "sp", "spix1")
+    sp.check_lens_light(settings)
+    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
+    source, adapt_path = kmeans_source(dataset, results_dir, settings)
+    return PhaseProblem(
+        "spix2",
+        dataset,
+        space(sp.result, spix1.result),
+        sp_light_model(sp, source),
+        (*imaging_files(lens_dir), *sp.files, *spix1.files, adapt_path),
+        radius,
+    )

@@ -1,0 +1,275 @@
+"""What every phase is built from: the lens's imaging in the fit mask, the earlier phases'
+results, and the :class:`PhaseProblem` a phase samples (SPEC §8.1).
+
+A phase reads only earlier phases' ``result.json`` and ``samples.csv`` (and SPix1's adapt
+image), so any phase can be rerun alone. :func:`read_phase` refuses an earlier phase that
+is missing or whose sampler did not converge, naming the file and the command that makes
+it. :func:`load_dataset` reads the imaging in the circular mask of the settings.
+"""
+
+import contextlib
+import functools
+import json
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mgelens import mask as mask_module
+from mgelens.fit import FitDataset, FitSettings
+from mgelens.imaging import DATA_FILE, INFO_FILE, MASK_FILE, Imaging
+from mgelens.pipeline import fittable, models, products
+from mgelens.pipeline.records import (
+    ADAPT_IMAGE_FILE,
+    PhaseInputError,
+    light_components,
+    profiles_from_record,
+    read_fit_record,
+)
+from mgelens.pipeline.settings import SlamSettings
+from mgelens.search.model import ParameterSpace
+from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult
+
+logger = logging.getLogger("mgelens.pipeline")
+
+LOG_FILE = "phase.log"
+
+
+IMAGING_FILES = ("data.fits", "noise_map.fits", "psf.fits", MASK_FILE, INFO_FILE)
+
+
+# -- logging --------------------------------------------------------------------------
+
+
+@contextlib.contextmanager
+def phase_log(folder: Path) -> Iterator[None]:
+    """Copy ``mgelens`` log records of INFO and above into ``folder/phase.log``."""
+    handler = logging.FileHandler(folder / LOG_FILE)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    handler.setLevel(logging.INFO)
+    package = logging.getLogger("mgelens")
+    level = package.level
+    if package.getEffectiveLevel() > logging.INFO:
+        package.setLevel(logging.INFO)
+    package.addHandler(handler)
+    try:
+        yield
+    finally:
+        package.removeHandler(handler)
+        package.setLevel(level)
+        handler.close()
+
+
+# -- inputs ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class EarlierPhase:
+    """A finished phase read from its folder: result and maximum-likelihood fit record."""
+
+    folder: Path
+    result: PhaseResult
+    record: dict
+
+    @property
+    def files(self) -> list[Path]:
+        return [self.folder / RESULT_FILE, self.folder / SAMPLES_FILE]
+
+    @property
+    def lens_light_kind(self) -> str:
+        """ "mge" or "sersic": the kind of the phase's lens light."""
+        components = light_components(self.record)
+        return "sersic" if any(c["kind"] == "sersic" for c in components) else "mge"
+
+    @property
+    def lens_light_specs(self) -> tuple[models.LightSpec, ...]:
+        """Specs of the phase's linear (solved) lens light."""
+        return tuple(
+            models.SersicSpec(c["name"])
+            if c["kind"] == "sersic"
+            else models.LightSetSpec(c["name"], np.asarray(c["sigmas"], dtype=float))
+            for c in light_components(self.record)
+            if not c.get("fixed", False)
+        )
+
+    def check_lens_light(self, settings: SlamSettings) -> None:
+        """Raise :class:`PhaseInputError` unless the phase used the settings' lens light."""
+        if self.lens_light_kind != settings.lens_light_model:
+            raise PhaseInputError(
+                f"{self.folder / RESULT_FILE} was fitted with lens_light_model = "
+                f"{self.lens_light_kind!r} but the settings ask for "
+                f"{settings.lens_light_model!r}: rerun phase {self.folder.name!r} (and the "
+                "phases after it) with these settings"
+            )
+
+
+def read_phase(results_dir: str | Path, name: str, allow_unconverged: bool = False) -> EarlierPhase:
+    """The finished phase ``name`` in ``results_dir``.
+
+    Raises
+    ------
+    PhaseInputError
+        If its ``result.json`` is missing, naming the command that makes it, or records a
+        sampler that did not converge (unless ``allow_unconverged``,
+        ``slam.allow_unconverged``).
+    """
+    folder = Path(results_dir) / name
+    if not (folder / RESULT_FILE).is_file():
+        raise PhaseInputError(
+            f"{folder / RESULT_FILE} not found: run phase {name!r} first "
+            f"(mgelens phase {name} --results {results_dir} ...)"
+        )
+    record = read_fit_record(folder)
+    result = PhaseResult.read(folder)
+    if not (result.output.converged or allow_unconverged):
+        raise PhaseInputError(
+            f"{folder / RESULT_FILE} is not converged ({result.output.stop_reason}): rerun "
+            f"phase {name!r} without the cap or with more live points, or set "
+            "slam.allow_unconverged: true to build on it anyway"
+        )
+    return EarlierPhase(folder, result, record)
+
+
+def earlier_phases(
+    results_dir: str | Path, settings: SlamSettings, *names: str
+) -> tuple[EarlierPhase, ...]:
+    """The finished phases ``names`` (:func:`read_phase` with the settings'
+    ``allow_unconverged``)."""
+    return tuple(read_phase(results_dir, name, settings.allow_unconverged) for name in names)
+
+
+def resolve_mask_radius(lens_dir: Path, settings: SlamSettings) -> float:
+    """Mask radius (arcsec): the settings' value, else ``mask_radius`` of ``truth.json``."""
+    if settings.mask_radius is not None:
+        return float(settings.mask_radius)
+    truth = lens_dir / "truth.json"
+    if truth.is_file():
+        radius = json.loads(truth.read_text()).get("mask_radius")
+        if radius is not None:
+            return float(radius)
+    raise PhaseInputError(
+        f"no mask radius for {lens_dir}: pass --mask-radius, set slam.mask_radius in the "
+        "config, or give the folder a truth.json with mask_radius"
+    )
+
+
+def load_dataset(
+    lens_dir: Path, settings: SlamSettings, light_centre: tuple[float, float]
+) -> tuple[FitDataset, float]:
+    """Imaging of ``lens_dir`` in the circular mask of the settings, and the mask radius.
+
+    A ``mask.fits`` in the folder is combined with the circle (a pixel is used only if
+    both use it); only the pixels used must hold finite data and a positive noise.
+    ``light_centre`` (arcsec) is where light profiles are over-sampled.
+
+    Raises
+    ------
+    ImagingError
+        Naming ``data.fits``, for a circle reaching beyond the image or data without
+        light inside it (:mod:`mgelens.pipeline.fittable`), and for unreadable or invalid
+        files (:class:`~mgelens.imaging.Imaging`).
+    """
+    radius = resolve_mask_radius(lens_dir, settings)
+    data_file = lens_dir / DATA_FILE
+    circle = functools.partial(_fit_circle, data_file, radius, settings.mask_centre)
+    imaging = Imaging.from_folder(lens_dir, pixel_scale=settings.pixel_scale, mask_from=circle)
+    mask = imaging.mask
+    fittable.check_signal(data_file, imaging, mask, radius)
+    fit_settings = FitSettings(
+        positive_only=settings.positive_only,
+        sub_size=settings.sub_size,
+        lp_sub_size=settings.lp_sub_size,
+        lp_sub_size_centre=settings.lp_sub_size_centre,
+        lp_centre_radius=settings.lp_centre_radius,
+        use_border=settings.use_border,
+        force_edge_pixels_to_zero=settings.force_edge_pixels_to_zero,
+        edge_rule=settings.edge_rule,
+        psf_trim=settings.psf_trim,
+    )
+    return FitDataset.from_imaging(imaging, mask, fit_settings, light_centre), radius
+
+
+def _fit_circle(
+    data_file: Path,
+    radius: float,
+    centre: tuple[float, float],
+    shape: tuple[int, int],
+    pixel_scale: float,
+) -> np.ndarray:
+    """The fit's circular mask on an image of ``shape`` (True = excluded), refused if it
+    reaches beyond the image."""
+    fittable.check_circle_inside(data_file, shape, pixel_scale, radius, centre)
+    return mask_module.circular(shape, pixel_scale, radius, centre)
+
+
+def imaging_files(lens_dir: Path) -> list[Path]:
+    """The imaging files of ``lens_dir`` that exist (inputs of every phase)."""
+    return [lens_dir / f for f in IMAGING_FILES if (lens_dir / f).is_file()]
+
+
+# -- the problem and what phases share ------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseProblem:
+    """Everything a phase samples: data, parameter space, model mapping, input files."""
+
+    name: str
+    dataset: FitDataset
+    space: ParameterSpace
+    model: models.PhaseModel
+    inputs: tuple[Path, ...]
+    mask_radius: float
+    positions: models.PositionsPenalty | None = None
+
+
+def positions_penalty(sp: EarlierPhase, settings: SlamSettings) -> models.PositionsPenalty | None:
+    """The positions penalty from SP's result if the settings ask for it (and SP found at
+    least two images), else ``None``."""
+    if not settings.positions_penalty:
+        return None
+    record = sp.record.get("positions") or {"positions": []}
+    positions = np.asarray(record["positions"], dtype=float).reshape(-1, 2)
+    if len(positions) < 2:
+        logger.warning(
+            "SP found %d image(s) of its source centre: no positions penalty", len(positions)
+        )
+        return None
+    logger.info(
+        "positions penalty: %d images, threshold %.3g arcsec", len(positions), record["threshold"]
+    )
+    return models.PositionsPenalty(positions, float(record["threshold"]))
+
+
+def sp_light_model(sp: EarlierPhase, source: models.SourceModel) -> models.PhaseModel:
+    """SPix1/SPix2 model: SP's MGE geometry with intensities re-solved, or SP's Sérsics
+    fixed entirely (intensities included, SPEC §8.1)."""
+    if sp.lens_light_kind == "sersic":
+        return models.PhaseModel((), source, fixed_light=profiles_from_record(sp.record))
+    return models.PhaseModel(sp.lens_light_specs, source)
+
+
+def kmeans_source(
+    dataset: FitDataset, results_dir: Path, settings: SlamSettings
+) -> tuple[models.KMeansSourceModel, Path]:
+    """SPix2's k-means source model on SPix1's adapt image, and the adapt image's path
+    (an input of SPix2, LIGHT and MASS)."""
+    path = Path(results_dir) / "spix1" / ADAPT_IMAGE_FILE
+    if not path.is_file():
+        raise PhaseInputError(f"{path} not found: rerun phase 'spix1'")
+    adapt = products.read_adapt_image(path, dataset.mask)
+    x, y = dataset.pixel_centres
+    source = models.KMeansSourceModel(
+        x,
+        y,
+        adapt,
+        settings.source_pixels,
+        settings.kmeans_seed,
+        settings.kmeans_scheme,
+        settings.interpolation,
+        settings.cross_offset,
+        settings.adaptive_signals,
+    )
+    return source, path
