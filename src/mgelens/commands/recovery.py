@@ -176,6 +176,14 @@ def _isophote_recovery(args, lens, truth, true_light, pixel_scale) -> IsophoteRe
         )
     true = isophote_table(true_light, pixel_scale, centre=true_light_centre(truth))
     result = isophote_recovery(fitted, true)
+    if result.n_compared < result.n_radii:
+        half_width = 0.5 * true_light.shape[1] * pixel_scale
+        logger.warning(
+            "isophotes of %s compared at %d of %d radii over 0.5-2.5 arcsec: the fitted or the "
+            "true table does not reach them all (the true image spans +-%.2f arcsec; the "
+            "isophote levels need the light out to 3 arcsec)",
+            lens, result.n_compared, result.n_radii, half_width,
+        )  # fmt: skip
     if args.isophote_figure is not None:
         profile = pd.DataFrame(result.profile, columns=list(PROFILE_COLUMNS), dtype=float)
         save_png(isophote_recovery_figure(fitted, true, profile, lens), args.isophote_figure)
