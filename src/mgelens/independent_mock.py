@@ -42,19 +42,16 @@ from dataclasses import dataclass
 import numpy as np
 
 import mgelens
-from mgelens.imaging import Imaging
 from mgelens.mass import EPL, ExternalShear
-from mgelens.mock_lenses import DEFAULT_POPULATION_SEED, POPULATION_MASK_RADIUS
+from mgelens.mock_lenses import DEFAULT_POPULATION_SEED, POPULATION_MASK_RADIUS, random_shear
 from mgelens.simulate import (
     BRIGHTNESS_UNIT,
     FILE_DESCRIPTIONS,
     MOCK_FILES,
     MockImaging,
     Observation,
+    expose,
     mass_dict,
-    noise_map_from,
-    noisy_data,
-    source_amplitude,
 )
 
 LENS_STREAM, SOURCE_STREAM, NOISE_STREAM = 10, 11, 12
@@ -250,8 +247,7 @@ def independent_lens(index: int, population_seed: int = DEFAULT_POPULATION_SEED)
     centre = (float(rng.normal(0.0, 0.02)), float(rng.normal(0.0, 0.02)))
     light, brightness_at_1 = _random_light(centre, rng)
     outer_angle = 0.5 * math.degrees(math.atan2(light[-1]["e2"], light[-1]["e1"]))
-    shear_magnitude = rng.uniform(0.0, 0.1)
-    shear_angle = np.deg2rad(rng.uniform(0.0, 180.0))
+    shear = random_shear(rng)
     mass = (
         EPL(
             centre=centre,
@@ -260,10 +256,7 @@ def independent_lens(index: int, population_seed: int = DEFAULT_POPULATION_SEED)
             angle=float(np.mod(outer_angle + rng.normal(0.0, 10.0), 180.0)),
             slope=float(rng.uniform(1.75, 2.45)),
         ),
-        ExternalShear(
-            gamma_1=float(shear_magnitude * np.cos(2.0 * shear_angle)),
-            gamma_2=float(shear_magnitude * np.sin(2.0 * shear_angle)),
-        ),
+        shear,
     )
     z_lens = float(rng.uniform(0.1, 0.35))
     z_source = z_lens + float(rng.uniform(0.2, 0.7))
@@ -403,20 +396,8 @@ def simulate_independent(
     lens_blurred = convolution.convolution2d(lens_light)[inner]
     source_blurred_unit = convolution.convolution2d(lensed_unit)[inner]
     lens_light, lensed_unit = lens_light[inner], lensed_unit[inner]
-    amplitude = source_amplitude(
-        lens_blurred,
-        source_blurred_unit,
-        observation.exposure_time,
-        observation.sky,
-        observation.signal_to_noise,
-    )
-    lensed_source = amplitude * lensed_unit
-    source_blurred = amplitude * source_blurred_unit
-    model = lens_blurred + source_blurred
-    noise_map = noise_map_from(model, observation.exposure_time, observation.sky)
-    data = noisy_data(
-        model, observation.exposure_time, observation.sky, np.random.default_rng(lens.seed)
-    )
+    exposed = expose(lens_blurred, lensed_unit, source_blurred_unit, observation, lens.seed)
+    amplitude = exposed.amplitude
     plane = _source_plane(lens, observation, source_model, source_kwargs) * amplitude
     truth = _truth(
         lens,
@@ -424,23 +405,13 @@ def simulate_independent(
         lenstronomy.__version__,
         amplitude=amplitude,
         lens_light=lens_light,
-        source_blurred=source_blurred,
-        noise_map=noise_map,
-        model=model,
+        source_blurred=exposed.lensed_source_blurred,
+        noise_map=exposed.noise_map,
+        model=exposed.model,
         lens_names=names,
         lens_kwargs=lens_kwargs,
     )
-    imaging = Imaging(data, noise_map, kernel, scale, name=lens.name, unit=BRIGHTNESS_UNIT)
-    return MockImaging(
-        imaging=imaging,
-        model=model,
-        lens_light=lens_light,
-        lens_light_blurred=lens_blurred,
-        lensed_source=lensed_source,
-        lensed_source_blurred=source_blurred,
-        source=plane,
-        truth=truth,
-    )
+    return exposed.imaging(lens.name, kernel, observation, lens_light, lens_blurred, plane, truth)
 
 
 def source_plane_centre(lens: IndependentLens) -> tuple[float, float]:

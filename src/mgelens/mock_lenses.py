@@ -240,6 +240,17 @@ POPULATION_SIZE = 38
 POPULATION_MASK_RADIUS = 3.0
 
 
+def random_shear(rng: np.random.Generator, max_magnitude: float = 0.1) -> ExternalShear:
+    """External shear of magnitude U(0, ``max_magnitude``) at an angle U(0°, 180°), drawn
+    in that order from ``rng``."""
+    magnitude = rng.uniform(0.0, max_magnitude)
+    angle = np.deg2rad(rng.uniform(0.0, 180.0))
+    return ExternalShear(
+        gamma_1=float(magnitude * np.cos(2.0 * angle)),
+        gamma_2=float(magnitude * np.sin(2.0 * angle)),
+    )
+
+
 def population_lens(index: int, population_seed: int = DEFAULT_POPULATION_SEED) -> MockLens:
     """Lens ``index`` of a SLACS-like mock population (named ``P{index:02d}``).
 
@@ -266,8 +277,7 @@ def population_lens(index: int, population_seed: int = DEFAULT_POPULATION_SEED) 
     rng = np.random.default_rng([population_seed, index, 0])
     centre = (float(rng.normal(0.0, 0.02)), float(rng.normal(0.0, 0.02)))
     light = _random_isophote_light(centre, rng)
-    shear_magnitude = rng.uniform(0.0, 0.1)
-    shear_angle = np.deg2rad(rng.uniform(0.0, 180.0))
+    shear = random_shear(rng)
     mass = (
         EPL(
             centre=centre,
@@ -276,10 +286,7 @@ def population_lens(index: int, population_seed: int = DEFAULT_POPULATION_SEED) 
             angle=float(np.mod(light.angle.outer + rng.normal(0.0, 10.0), 180.0)),
             slope=float(np.clip(rng.normal(2.08, 0.1), 1.8, 2.4)),
         ),
-        ExternalShear(
-            gamma_1=float(shear_magnitude * np.cos(2.0 * shear_angle)),
-            gamma_2=float(shear_magnitude * np.sin(2.0 * shear_angle)),
-        ),
+        shear,
     )
     z_lens = float(rng.uniform(0.1, 0.35))
     z_source = z_lens + float(rng.uniform(0.2, 0.7))

@@ -288,6 +288,62 @@ class MockImaging:
     truth: dict
 
 
+@dataclass(frozen=True, eq=False)
+class Exposure:
+    """The images of a mock once its source is scaled to the target S/N and the noise is
+    drawn (SPEC §10.4 steps 3–4); e⁻ s⁻¹ per pixel."""
+
+    amplitude: float
+    lensed_source: np.ndarray
+    lensed_source_blurred: np.ndarray
+    model: np.ndarray
+    noise_map: np.ndarray
+    data: np.ndarray
+
+    def imaging(self, name, psf, observation, lens_light, lens_light_blurred, source, truth):
+        """The :class:`MockImaging` of these images with the lens light, the scaled
+        source-plane image and the truth."""
+        imaging = Imaging(
+            self.data, self.noise_map, psf, observation.pixel_scale, name=name,
+            unit=BRIGHTNESS_UNIT,
+        )  # fmt: skip
+        return MockImaging(
+            imaging=imaging,
+            model=self.model,
+            lens_light=lens_light,
+            lens_light_blurred=lens_light_blurred,
+            lensed_source=self.lensed_source,
+            lensed_source_blurred=self.lensed_source_blurred,
+            source=source,
+            truth=truth,
+        )
+
+
+def expose(
+    lens_light_blurred: np.ndarray,
+    lensed_unit: np.ndarray,
+    source_blurred_unit: np.ndarray,
+    observation: Observation,
+    seed,
+) -> Exposure:
+    """Scale the unit lensed source (before and after the PSF) so that its peak S/N is the
+    observation's, add it to the blurred lens light, and draw the noise from
+    ``default_rng(seed)`` (SPEC §10.4 steps 3–4)."""
+    amplitude = source_amplitude(
+        lens_light_blurred,
+        source_blurred_unit,
+        observation.exposure_time,
+        observation.sky,
+        observation.signal_to_noise,
+    )
+    source_blurred = amplitude * source_blurred_unit
+    model = lens_light_blurred + source_blurred
+    noise_map = noise_map_from(model, observation.exposure_time, observation.sky)
+    rng = np.random.default_rng(seed)
+    data = noisy_data(model, observation.exposure_time, observation.sky, rng)
+    return Exposure(amplitude, amplitude * lensed_unit, source_blurred, model, noise_map, data)
+
+
 @dataclass(frozen=True)
 class LensedSource:
     """A source seen through a lens: image(θ) = source(β(θ)), β = θ − α(θ)."""
@@ -317,19 +373,8 @@ def simulate(lens: MockLens, observation: Observation | None = None) -> MockImag
     lens_blurred = convolve_image(lens_light, psf)[inner]
     source_blurred_unit = convolve_image(lensed_unit, psf)[inner]
     lens_light, lensed_unit = lens_light[inner], lensed_unit[inner]
-    amplitude = source_amplitude(
-        lens_blurred,
-        source_blurred_unit,
-        observation.exposure_time,
-        observation.sky,
-        observation.signal_to_noise,
-    )
-    lensed_source = amplitude * lensed_unit
-    source_blurred = amplitude * source_blurred_unit
-    model = lens_blurred + source_blurred
-    noise_map = noise_map_from(model, observation.exposure_time, observation.sky)
-    rng = np.random.default_rng(lens.seed)
-    data = noisy_data(model, observation.exposure_time, observation.sky, rng)
+    exposed = expose(lens_blurred, lensed_unit, source_blurred_unit, observation, lens.seed)
+    amplitude = exposed.amplitude
     plane_scale = observation.source_plane_pixel_scale
     plane_shape = (observation.source_plane_size, observation.source_plane_size)
     source_plane = amplitude * oversampled_image(
@@ -340,21 +385,13 @@ def simulate(lens: MockLens, observation: Observation | None = None) -> MockImag
         observation,
         amplitude=amplitude,
         lens_light=lens_light,
-        source_blurred=source_blurred,
-        noise_map=noise_map,
-        model=model,
+        source_blurred=exposed.lensed_source_blurred,
+        noise_map=exposed.noise_map,
+        model=exposed.model,
         source_plane=source_plane,
     )
-    imaging = Imaging(data, noise_map, psf, scale, name=lens.name, unit=BRIGHTNESS_UNIT)
-    return MockImaging(
-        imaging=imaging,
-        model=model,
-        lens_light=lens_light,
-        lens_light_blurred=lens_blurred,
-        lensed_source=lensed_source,
-        lensed_source_blurred=source_blurred,
-        source=source_plane,
-        truth=truth,
+    return exposed.imaging(
+        lens.name, psf, observation, lens_light, lens_blurred, source_plane, truth
     )
 
 
