@@ -164,17 +164,7 @@ def phase_calls(lens_dir: Path, settings, einstein_radius: float, n_calls: int, 
     spix1 = models.PhaseModel(sp_specs, overlay)
     adapt = floored_adapt_image(fit(dataset, spix1.build(values)).lensed_source_image)
     px, py = dataset.pixel_centres
-    kmeans = models.KMeansSourceModel(
-        px,
-        py,
-        adapt,
-        settings.source_pixels,
-        settings.kmeans_seed,
-        settings.kmeans_scheme,
-        settings.interpolation,
-        settings.cross_offset,
-        settings.adaptive_signals,
-    )
+    kmeans = models.KMeansSourceModel.from_settings(px, py, adapt, settings)
     fixed_source = kmeans.fixed(values)
     phase_models = {
         "sp": models.PhaseModel(sp_specs, models.MGESourceModel()),

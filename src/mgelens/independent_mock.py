@@ -52,6 +52,7 @@ from mgelens.simulate import (
     Observation,
     expose,
     mass_dict,
+    signal_to_noise_record,
 )
 
 LENS_STREAM, SOURCE_STREAM, NOISE_STREAM = 10, 11, 12
@@ -481,11 +482,7 @@ def _truth(
                 np.hypot(centre[0] - caustic[0], centre[1] - caustic[1])
             ),
         },
-        "signal_to_noise": {
-            "source_max": float(np.max(source_blurred / noise_map)),
-            "data_max": float(np.max(model / noise_map)),
-            "definition": "max over pixels of the noise-free PSF-convolved component / noise",
-        },
+        "signal_to_noise": signal_to_noise_record(source_blurred, model, noise_map),
         "source_plane": {
             "pixel_scale": observation.source_plane_pixel_scale,
             "shape": [observation.source_plane_size] * 2,

@@ -434,11 +434,7 @@ def _truth(
             "extent_meaning": "diameter (arcsec) of the circle about the source centre that "
             "holds every source-plane pixel above 2% of the peak",
         },
-        "signal_to_noise": {
-            "source_max": float(np.max(source_blurred / noise_map)),
-            "data_max": float(np.max(model / noise_map)),
-            "definition": "max over pixels of the noise-free PSF-convolved component / noise",
-        },
+        "signal_to_noise": signal_to_noise_record(source_blurred, model, noise_map),
         "source_plane": {
             "pixel_scale": observation.source_plane_pixel_scale,
             "shape": list(source_plane.shape),
@@ -447,6 +443,17 @@ def _truth(
         "files": {
             key: {"name": MOCK_FILES[key], "content": FILE_DESCRIPTIONS[key]} for key in MOCK_FILES
         },
+    }
+
+
+def signal_to_noise_record(
+    source_blurred: np.ndarray, model: np.ndarray, noise_map: np.ndarray
+) -> dict:
+    """The ``truth.json`` entry of a mock's peak S/N, of its source and of all its light."""
+    return {
+        "source_max": float(np.max(source_blurred / noise_map)),
+        "data_max": float(np.max(model / noise_map)),
+        "definition": "max over pixels of the noise-free PSF-convolved component / noise",
     }
 
 

@@ -430,6 +430,25 @@ class KMeansSourceModel:
     offset: str = "anchor"
     signals: str = "anchor"
 
+    @classmethod
+    def from_settings(
+        cls, pixel_x: np.ndarray, pixel_y: np.ndarray, adapt_image: np.ndarray, settings
+    ) -> "KMeansSourceModel":
+        """The k-means source of the phases on these pixels and adapt image, with the
+        pixel count, seed, scheme, interpolation, cross offset and adaptive signals of
+        ``settings`` (:class:`~mgelens.pipeline.settings.SlamSettings`)."""
+        return cls(
+            pixel_x,
+            pixel_y,
+            adapt_image,
+            settings.source_pixels,
+            settings.kmeans_seed,
+            settings.kmeans_scheme,
+            settings.interpolation,
+            settings.cross_offset,
+            settings.adaptive_signals,
+        )
+
     def centres(self, values: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
         """Image-plane k-means centres for the weight hyper-parameters in ``values``
         (duplicated centres make the mesh degenerate, which rejects the sample)."""

@@ -261,15 +261,4 @@ def kmeans_source(
         raise PhaseInputError(f"{path} not found: rerun phase 'spix1'")
     adapt = products.read_adapt_image(path, dataset.mask)
     x, y = dataset.pixel_centres
-    source = models.KMeansSourceModel(
-        x,
-        y,
-        adapt,
-        settings.source_pixels,
-        settings.kmeans_seed,
-        settings.kmeans_scheme,
-        settings.interpolation,
-        settings.cross_offset,
-        settings.adaptive_signals,
-    )
-    return source, path
+    return models.KMeansSourceModel.from_settings(x, y, adapt, settings), path
