@@ -12,10 +12,13 @@ from dataclasses import asdict
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter
 
 from mgelens.isophote_recovery import ISOPHOTE_TOLERANCES, IsophoteTolerances
 from mgelens.isophotes import ROUND_AXIS_RATIO, STATISTICS_SMA_RANGE, unwrap_position_angles
 
+SMA_TICKS = (0.1, 0.2, 0.3, 0.5, 1.0, 2.0, 3.0, 5.0)
+"""Labelled semi-major axes (arcsec) on the log axis."""
 FIT_COLOUR = "tab:blue"
 TRUE_COLOUR = "black"
 
@@ -99,6 +102,9 @@ def isophote_recovery_figure(
         bottom.set_xlabel("semi-major axis a [arcsec]")
         for ax in (top, bottom):
             ax.set_xscale("log")
+            ax.xaxis.set_major_locator(FixedLocator(SMA_TICKS))
+            ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+            ax.xaxis.set_minor_formatter(NullFormatter())
             ax.axvspan(1e-3, STATISTICS_SMA_RANGE[0], color="0.92", zorder=0)
             ax.axvspan(STATISTICS_SMA_RANGE[1], 1e3, color="0.92", zorder=0)
     sma = pd.concat([fitted["sma"], true["sma"]])
