@@ -35,9 +35,9 @@ from mgelens.pipeline.settings import (
     settings_from_mapping,
 )
 from mgelens.recovery import true_light_refit
+from mgelens.search.posterior import SamplerOutput
 from mgelens.search.priors import TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult
-from mgelens.search.sampler import SamplerOutput
 from mgelens.source.image_mesh import overlay_centres
 
 PIXEL = 0.1

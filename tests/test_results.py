@@ -10,6 +10,7 @@ import pytest
 
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
 from mgelens.search.model import Parameter, ParameterSpace
+from mgelens.search.posterior import SamplerOutput, credible_interval, weighted_quantile
 from mgelens.search.priors import Gaussian, LogUniform, TruncatedGaussian, Uniform, WidthModifier
 from mgelens.search.results import (
     PhaseResult,
@@ -18,12 +19,7 @@ from mgelens.search.results import (
     input_checksums,
     passed_priors,
 )
-from mgelens.search.sampler import (
-    SamplerOutput,
-    SamplerSettings,
-    credible_interval,
-    weighted_quantile,
-)
+from mgelens.search.sampler_settings import SamplerSettings
 
 N = 2000
 E1, E2 = ell_comps_from(0.7, 178.0)  # the angle posterior straddles 0°/180°

@@ -14,15 +14,10 @@ import pytest
 
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
+from mgelens.search.posterior import SamplerOutput, pool_runs
 from mgelens.search.priors import Uniform
-from mgelens.search.sampler import (
-    CheckpointMismatchError,
-    SamplerOutput,
-    SamplerSettings,
-    pool_runs,
-    resolve_sample_method,
-    run_nested,
-)
+from mgelens.search.sampler import CheckpointMismatchError, resolve_sample_method, run_nested
+from mgelens.search.sampler_settings import SamplerSettings
 from mgelens.threads import blas_threads
 
 MEAN = np.array([0.5, -0.3])

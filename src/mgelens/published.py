@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mgelens.search.sampler import SIGMA_PROBABILITY, weighted_quantile
+from mgelens.search.posterior import SIGMA_PROBABILITY, weighted_quantile
 
 logger = logging.getLogger(__name__)
 

@@ -55,15 +55,10 @@ from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mappin
 from mgelens.provenance import command_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
+from mgelens.search.posterior import SamplerOutput, pool_runs
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
-from mgelens.search.sampler import (
-    SPAWN,
-    SamplerOutput,
-    SamplerSettings,
-    pool_runs,
-    prepare_worker_process,
-    run_nested,
-)
+from mgelens.search.sampler import SPAWN, prepare_worker_process, run_nested
+from mgelens.search.sampler_settings import SamplerSettings
 from mgelens.threads import limit_threads
 
 logger = logging.getLogger("mgelens.pipeline")
@@ -271,7 +266,7 @@ def _solve(
     checksums: dict,
 ) -> PhaseResult:
     """Sample each problem (one per source-mesh realisation, :func:`chain_settings`), pool
-    the runs (:func:`~mgelens.search.sampler.pool_runs`) and write the phase's files; the
+    the runs (:func:`~mgelens.search.posterior.pool_runs`) and write the phase's files; the
     maximum-likelihood fit is that of the run holding the highest-likelihood sample.
     ``checksums`` are those of the problems' input files, recorded in the result."""
     first = problems[0]

@@ -37,7 +37,7 @@ from types import MappingProxyType
 import yaml
 
 from mgelens import values
-from mgelens.search.sampler import SamplerSettings
+from mgelens.search.sampler_settings import SamplerSettings
 from mgelens.source.interpolate import INTERPOLATIONS
 from mgelens.source.mesh import EDGE_RULES
 from mgelens.source.regularization import SIGNAL_AVERAGES
@@ -358,7 +358,7 @@ def settings_from_mapping(
     ----------
     content : mapping
         Field values of :class:`SlamSettings` (``samplers`` maps phase names to partial
-        :class:`~mgelens.search.sampler.SamplerSettings` dictionaries). It may name the
+        :class:`~mgelens.search.sampler_settings.SamplerSettings` dictionaries). It may name the
         profile under ``profile``.
     profile : str, optional
         Profile whose defaults are used; wins over ``content["profile"]``.

@@ -14,7 +14,7 @@ A phase folder holds
 
 Both are written atomically. :meth:`PhaseResult.read` returns an object equal to the one
 written. Medians and intervals are weighted quantiles of the samples
-(:func:`~mgelens.search.sampler.weighted_quantile`). Derived angles are unwrapped around
+(:func:`~mgelens.search.posterior.weighted_quantile`). Derived angles are unwrapped around
 the max-likelihood angle before taking quantiles, so their intervals stay contiguous and
 may extend below 0° or above 180°; the reported median is brought back into [0°, 180°)
 with the interval shifted by the same multiple of 180°.
@@ -36,8 +36,8 @@ import mgelens
 from mgelens.atomic import atomic_path, write_json
 from mgelens.provenance import code_version
 from mgelens.search.model import ParameterSpace, derived_values, names_with_derived
+from mgelens.search.posterior import SIGMA_PROBABILITY, SamplerOutput, weighted_quantile
 from mgelens.search.priors import PassingRule, TruncatedGaussian, WidthModifier, passed_prior
-from mgelens.search.sampler import SIGMA_PROBABILITY, SamplerOutput, weighted_quantile
 
 RESULT_FILE = "result.json"
 SAMPLES_FILE = "samples.csv"
