@@ -54,10 +54,11 @@ from mgelens.pipeline.records import ADAPT_IMAGE_FILE, MODEL_FILE, fit_record
 from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
 from mgelens.provenance import command_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
+from mgelens.search.evaluation import SPAWN, prepare_worker_process
 from mgelens.search.model import ParameterSpace
 from mgelens.search.posterior import SamplerOutput, pool_runs
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
-from mgelens.search.sampler import SPAWN, prepare_worker_process, run_nested
+from mgelens.search.sampler import run_nested
 from mgelens.search.sampler_settings import SamplerSettings
 from mgelens.threads import limit_threads
 
@@ -219,7 +220,7 @@ def _sample_alone(
     folder: Path,
 ) -> SamplerOutput:
     """One run of :func:`_sample_runs` in a worker process set up as a phase job
-    (:func:`~mgelens.search.sampler.prepare_worker_process`), its progress lines appended
+    (:func:`~mgelens.search.evaluation.prepare_worker_process`), its progress lines appended
     to the phase log."""
     prepare_worker_process()
     with phase_log(folder):

@@ -23,7 +23,7 @@
 * **Parallel likelihoods**: ``n_processes > 1`` runs a ``multiprocessing`` pool ("spawn"
   start method). The likelihood and the parameter space are sent once to each worker at
   start-up; neither dynesty's tasks nor its checkpoint carry them (only the names of the
-  module-level functions below), so a large dataset is never pickled per call. The
+  module-level functions of :mod:`mgelens.search.evaluation`), so a large dataset is never pickled per call. The
   likelihood must therefore be picklable when ``n_processes > 1``. Each worker runs one
   numba and one BLAS thread, so ``n_processes`` workers use as many cores.
 * **Rejected samples** (SPEC §8.4): the likelihood returns ``REJECTED_LOG_LIKELIHOOD``
@@ -31,19 +31,18 @@
   Calls and rejections are counted in shared memory (right with a pool) and stored in the
   checkpoint, so the counts survive a resume.
 
-One :func:`run_nested` runs at a time per process (the module holds the evaluation that
-dynesty's module-level callables forward to).
+One :func:`run_nested` runs at a time per process (:mod:`mgelens.search.evaluation`
+holds the one evaluation the samplers' module-level callables forward to).
 """
 
 import contextlib
 import json
 import logging
 import math
-import multiprocessing
 import time
 import warnings
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import dynesty
@@ -52,99 +51,25 @@ import numpy as np
 from scipy import special
 
 from mgelens.atomic import atomic_path, write_json
-from mgelens.memory import keep_freed_memory
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
+from mgelens.search.evaluation import (
+    SPAWN,
+    Evaluation,
+    evaluating,
+    installed_log_likelihood,
+    installed_log_likelihood_nautilus,
+    installed_prior_transform,
+)
 from mgelens.search.model import ParameterSpace
 from mgelens.search.posterior import SamplerOutput
 from mgelens.search.sampler_settings import SamplerSettings
-from mgelens.threads import limit_threads
 
 LOGGER = logging.getLogger("mgelens.search")
-SPAWN = multiprocessing.get_context("spawn")
-"""Process context of every worker pool (the likelihood pool here, MASS's side-by-side
-mesh runs in :mod:`mgelens.pipeline.run`): spawned workers, set up by
-:func:`prepare_worker_process`."""
 _STATE_ATTRIBUTE = "mgelens_state"
 
 
 class CheckpointMismatchError(ValueError):
     """A checkpoint belongs to a different parameter space, settings or seed."""
-
-
-# -- evaluation inside the sampler (main process and pool workers) ------------------------
-@dataclass(frozen=True)
-class _Evaluation:
-    """What the module-level callables evaluate: likelihood, space and shared counters."""
-
-    log_likelihood: Callable[[np.ndarray], float]
-    space: ParameterSpace
-    counts: object  # multiprocessing Array('q', 2): [calls, rejected]
-
-    def counted(self, x: np.ndarray) -> float:
-        value = float(self.log_likelihood(x))
-        if math.isnan(value) or value == math.inf:
-            raise FloatingPointError(
-                f"log likelihood is {value} at {self.space.values(x)}; "
-                f"return {REJECTED_LOG_LIKELIHOOD} to reject a sample"
-            )
-        rejected = value <= REJECTED_LOG_LIKELIHOOD
-        with self.counts.get_lock():
-            self.counts[0] += 1
-            self.counts[1] += int(rejected)
-        return REJECTED_LOG_LIKELIHOOD if rejected else value
-
-
-_current: list[_Evaluation] = []
-
-
-def _install(evaluation: _Evaluation | None) -> None:
-    """Make ``evaluation`` the one the callables below use."""
-    _current[:] = [] if evaluation is None else [evaluation]
-
-
-def prepare_worker_process() -> None:
-    """Set up a spawned worker process as a phase job is set up: one numba, BLAS and
-    OpenMP thread, freed memory kept (:func:`mgelens.memory.keep_freed_memory`). A spawned
-    worker inherits neither from its parent, and numba's default of all cores per worker
-    oversubscribes the machine (docs/design_notes.md, "Worker threads")."""
-    limit_threads(1)
-    keep_freed_memory()
-
-
-def _start_worker(evaluation: _Evaluation) -> None:
-    """Pool-worker initializer: :func:`prepare_worker_process`, then :func:`_install`."""
-    prepare_worker_process()
-    _install(evaluation)
-
-
-def _prior_transform(u: np.ndarray) -> np.ndarray:
-    return _current[0].space.prior_transform(u)
-
-
-def _log_likelihood(x: np.ndarray) -> float:
-    return _current[0].counted(x)
-
-
-def _log_likelihood_nautilus(x: np.ndarray) -> float:
-    """Nautilus takes −inf (not −1e99) for a rejected sample."""
-    value = _current[0].counted(x)
-    return -math.inf if value <= REJECTED_LOG_LIKELIHOOD else value
-
-
-@contextlib.contextmanager
-def _evaluating(evaluation: _Evaluation, n_processes: int) -> Iterator[object | None]:
-    """Install ``evaluation`` here and, for ``n_processes > 1``, in a pool it yields."""
-    if _current:
-        raise RuntimeError("run_nested is already running in this process")
-    _install(evaluation)
-    try:
-        if n_processes == 1:
-            yield None
-        else:
-            with SPAWN.Pool(n_processes, _start_worker, (evaluation,)) as pool:
-                yield pool
-    finally:
-        _install(None)
 
 
 # -- checkpoint bookkeeping ----------------------------------------------------------------
@@ -275,7 +200,11 @@ def _new_dynesty_sampler(settings: SamplerSettings, n_dim: int, seed: int, pool)
     )
     with _plateau_warnings_logged_by_mgelens():
         return factory(
-            _log_likelihood, _prior_transform, n_dim, rstate=np.random.default_rng(seed), **options
+            installed_log_likelihood,
+            installed_prior_transform,
+            n_dim,
+            rstate=np.random.default_rng(seed),
+            **options,
         )
 
 
@@ -388,7 +317,7 @@ def _save_dynesty(sampler, path: Path) -> None:
 
 
 def _sample_dynesty(
-    evaluation: _Evaluation,
+    evaluation: Evaluation,
     settings: SamplerSettings,
     checkpoint_path: Path | None,
     seed: int,
@@ -401,7 +330,7 @@ def _sample_dynesty(
         _check_sidecar(checkpoint_path, fingerprint)
     elif checkpoint_path is not None:
         write_json(fingerprint_path(checkpoint_path), fingerprint)
-    with _evaluating(evaluation, settings.n_processes) as pool:
+    with evaluating(evaluation, settings.n_processes) as pool:
         stored = {"n_calls": 0, "n_rejected": 0, "runtime": 0.0, "n_resumes": -1}
         if resume:
             sampler = _restore_dynesty(checkpoint_path, pool)
@@ -480,7 +409,7 @@ def _nautilus_progress(sampler, seconds: float) -> str:
 
 
 def _sample_nautilus(
-    evaluation: _Evaluation,
+    evaluation: Evaluation,
     settings: SamplerSettings,
     checkpoint_path: Path | None,
     seed: int,
@@ -496,10 +425,10 @@ def _sample_nautilus(
             _check_sidecar(filepath, fingerprint)
         write_json(fingerprint_path(filepath), fingerprint)
     started = time.perf_counter()
-    with _evaluating(evaluation, settings.n_processes) as pool:
+    with evaluating(evaluation, settings.n_processes) as pool:
         sampler = nautilus.Sampler(
-            _prior_transform,
-            _log_likelihood_nautilus,
+            installed_prior_transform,
+            installed_log_likelihood_nautilus,
             n_dim=space.n_free,
             n_live=settings.n_live,
             enlarge_per_dim=settings.enlarge_per_dim,
@@ -609,7 +538,7 @@ def run_nested(
     checkpoint = None if checkpoint_path is None else Path(checkpoint_path)
     if checkpoint is not None:
         checkpoint.parent.mkdir(parents=True, exist_ok=True)
-    evaluation = _Evaluation(log_likelihood, space, SPAWN.Array("q", 2))
+    evaluation = Evaluation(log_likelihood, space, SPAWN.Array("q", 2))
     if settings.method == "nautilus":
         return _sample_nautilus(evaluation, settings, checkpoint, seed, log)
     output = _sample_dynesty(evaluation, settings, checkpoint, seed, log)
