@@ -21,7 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from mgelens.fit import FitDataset, FitSettings, LensModel, PixelizedSource, fit
+from mgelens.fit import FitDataset, LensModel, PixelizedSource, fit
+from mgelens.fit_settings import FitSettings
 from mgelens.source.image_mesh import overlay_centres
 from mgelens.source.regularization import ConstantSplit
 

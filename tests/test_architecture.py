@@ -13,7 +13,7 @@ LAYERS = (
     ("profiles", ("light", "mass")),
     ("source", ("source",)),
     ("inversion", ("inversion",)),
-    ("fit", ("fit",)),
+    ("fit", ("fit", "fit_settings")),
     ("search", ("search",)),
     ("pipeline", ("pipeline",)),
     ("analysis", ("simulate", "mock_light", "mock_sources", "mock_lenses",

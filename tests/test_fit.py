@@ -6,7 +6,6 @@ import pytest
 from mgelens.fit import (
     REJECTED_LOG_LIKELIHOOD,
     FitDataset,
-    FitSettings,
     LensModel,
     MGESource,
     PixelizedSource,
@@ -15,6 +14,7 @@ from mgelens.fit import (
     pixelized_operator,
     source_light_columns,
 )
+from mgelens.fit_settings import FitSettings
 from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging

@@ -6,7 +6,7 @@ the image pixels, weighted by the true lensed source) and the regularization coe
 k = −n … n. A smooth scheme gives a curve whose step-to-step changes follow its trend;
 a scheme whose source pixels switch discretely as γ moves gives jumps.
 
-Two source schemes, each under two edge rules (:class:`mgelens.fit.FitSettings`):
+Two source schemes, each under two edge rules (:class:`mgelens.fit_settings.FitSettings`):
 
 * ``natural_neighbour`` interpolation with cross regularization
   (:class:`~mgelens.source.regularization.ConstantSplit`), the paper's scheme;
@@ -26,7 +26,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
-from mgelens.fit import FitDataset, FitSettings, LensModel, PixelizedSource, fit
+from mgelens.fit import FitDataset, LensModel, PixelizedSource, fit
+from mgelens.fit_settings import FitSettings
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.light import MGESet
@@ -46,7 +47,7 @@ SCHEMES = {
 }
 """Scheme name: (source interpolation, regularization class with coefficient λ)."""
 EDGE_RULES = ("anchor", "continuous")
-"""Edge rules scanned (:attr:`mgelens.fit.FitSettings.edge_rule`)."""
+"""Edge rules scanned (:attr:`mgelens.fit_settings.FitSettings.edge_rule`)."""
 REGULARIZATION_COEFFICIENT = 1.0
 """λ of both schemes' constant regularization."""
 KMEANS_WEIGHT_FLOOR, KMEANS_WEIGHT_POWER = 0.2, 1.0

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from mgelens import mask as mask_module
-from mgelens.fit import FitDataset, FitSettings
+from mgelens.fit import FitDataset
+from mgelens.fit_settings import FitSettings
 from mgelens.imaging import DATA_FILE, INFO_FILE, MASK_FILE, Imaging
 from mgelens.pipeline import fittable, models, products
 from mgelens.pipeline.records import (

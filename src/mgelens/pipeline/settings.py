@@ -39,8 +39,7 @@ import yaml
 from mgelens import values
 from mgelens.search.sampler_settings import SamplerSettings
 from mgelens.source.interpolate import INTERPOLATIONS
-from mgelens.source.mesh import EDGE_RULES
-from mgelens.source.regularization import SIGNAL_AVERAGES
+from mgelens.source.schemes import EDGE_RULES, SIGNAL_AVERAGES
 
 PHASES = ("sp", "spix1", "spix2", "light", "mass")
 """Phase names in chain order; each is also the name of the phase's result folder."""
@@ -139,12 +138,12 @@ class SlamSettings:
         Fix the convex-hull source pixels to zero in the non-negative solve (SPEC §6.3, the
         anchor's default since 2023). Off, the hull pixels are solved like the others.
     edge_rule : {"anchor", "continuous"}
-        How the source mesh treats its hull and the mask border (:class:`mgelens.fit.FitSettings`):
+        How the source mesh treats its hull and the mask border (:class:`mgelens.fit_settings.FitSettings`):
         the anchor's rules (SPEC §4.2–4.4), or continuous ones under which the evidence is
         a continuous function of the mass parameters (with ``force_edge_pixels_to_zero``
         off and, for adaptive regularization, ``adaptive_signals: weighted``).
     sub_size, lp_sub_size, lp_sub_size_centre, lp_centre_radius, use_border, psf_trim
-        Fit settings (:class:`mgelens.fit.FitSettings`). ``psf_trim`` cuts the PSF to the
+        Fit settings (:class:`mgelens.fit_settings.FitSettings`). ``psf_trim`` cuts the PSF to the
         kernel holding every entry ≥ that fraction of its peak: 1e−10 (paper) changes no
         model image; quick's 1e−4 cuts the mock's 21×21 Gaussian PSF (σ = 1 pixel) to
         9×9, losing 6e−6 of its flux, and leaves the SLACS 15×15 PSFs whole. Quick's 2×2

@@ -2,10 +2,10 @@
 
 dynesty and nautilus call module-level functions (:func:`installed_prior_transform`,
 :func:`installed_log_likelihood`, :func:`installed_log_likelihood_nautilus`) that
-forward to the one :class:`Evaluation` installed here, so that neither a sampler's tasks nor its checkpoint
-carry the likelihood or its data: a pool's workers receive the evaluation once, at
-start-up (:func:`evaluating`). Every call is counted in shared memory, and a likelihood
-of −1e99 or below is a rejected sample (SPEC §8.4).
+forward to the one :class:`Evaluation` installed here, so that neither a sampler's tasks
+nor its checkpoint carry the likelihood or its data: a pool's workers receive the
+evaluation once, at start-up (:func:`evaluating`). Every call is counted in shared
+memory, and a likelihood of −1e99 or below is a rejected sample (SPEC §8.4).
 """
 
 import contextlib

@@ -23,8 +23,9 @@
 * **Parallel likelihoods**: ``n_processes > 1`` runs a ``multiprocessing`` pool ("spawn"
   start method). The likelihood and the parameter space are sent once to each worker at
   start-up; neither dynesty's tasks nor its checkpoint carry them (only the names of the
-  module-level functions of :mod:`mgelens.search.evaluation`), so a large dataset is never pickled per call. The
-  likelihood must therefore be picklable when ``n_processes > 1``. Each worker runs one
+  module-level functions of :mod:`mgelens.search.evaluation`), so a large dataset is
+  never pickled per call. The likelihood must therefore be picklable when
+  ``n_processes > 1``. Each worker runs one
   numba and one BLAS thread, so ``n_processes`` workers use as many cores.
 * **Rejected samples** (SPEC §8.4): the likelihood returns ``REJECTED_LOG_LIKELIHOOD``
   (−1e99) for a sample that cannot be fitted; −inf and anything below −1e99 count the same.

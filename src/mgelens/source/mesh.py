@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
+from mgelens.source.schemes import EDGE_RULES
+
 QHULL_OPTIONS = "Qbb Qc Qz Q12"
 """Qhull options of the triangulation (scipy's 2-D default, made explicit).
 
@@ -37,10 +39,6 @@ regular lattices; flat (collinear) input raises ``QhullError``.
 
 AREA_PERCENTILE = 90.0
 """Percentile of the cell areas used for unbounded cells and as the area cap."""
-
-EDGE_RULES = ("anchor", "continuous")
-"""Treatments of the convex hull: the anchor's (discontinuous when a point joins or leaves
-the hull) or the continuous one (:attr:`VoronoiMesh.ringed`)."""
 
 RING_POINTS = 32
 """Auxiliary points of the ring that embeds a mesh under the continuous edge rule."""

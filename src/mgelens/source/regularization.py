@@ -22,13 +22,9 @@ from mgelens.source.image_mesh import floored_adapt_image
 from mgelens.source.interpolate import cross_points, natural_neighbour_weights
 from mgelens.source.mapping import SourceWeights
 from mgelens.source.mesh import VoronoiMesh
+from mgelens.source.schemes import SIGNAL_AVERAGES
 
 JITTER = 1e-8
-
-
-SIGNAL_AVERAGES = ("anchor", "weighted")
-"""How a source pixel's signal averages the adapt image over the sub-pixels it serves
-(:func:`adaptive_pixel_signals`)."""
 
 
 def adaptive_pixel_signals(

@@ -1,0 +1,10 @@
+"""Names of the source-plane schemes a setting chooses between (no numerics here, so that
+configuration can check a choice without loading the meshes)."""
+
+EDGE_RULES = ("anchor", "continuous")
+"""Treatments of the convex hull: the anchor's (discontinuous when a point joins or leaves
+the hull) or the continuous one (:attr:`mgelens.source.mesh.VoronoiMesh.ringed`)."""
+
+SIGNAL_AVERAGES = ("anchor", "weighted")
+"""How a source pixel's signal averages the adapt image over the sub-pixels it serves
+(:func:`mgelens.source.regularization.adaptive_pixel_signals`)."""
