@@ -445,7 +445,39 @@ def fit(
     Raises one of :data:`FitError` when the sample cannot be fitted (degenerate mesh,
     non-positive-definite system, NNLS iteration cap).
     """
+    fixed, lens_columns, source_columns = _dense_light(dataset, model)
+    dense = np.hstack([lens_columns, source_columns])
+    operator = system = None
+    if isinstance(model.source, PixelizedSource):
+        system = dataset.repeated_source(model.mass, model.source)
+        operator = (
+            pixelized_operator(dataset, model.mass, model.source)
+            if system is None
+            else system.operator
+        )
+    if dense.shape[1] == 0 and operator is None:
+        raise ValueError("the model has no linear light: give it lens light or a source")
+    q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
     settings = dataset.settings
+    fixed_zero = None
+    if operator is not None and settings.positive_only and settings.force_edge_pixels_to_zero:
+        fixed_zero = np.concatenate(
+            [np.zeros(dense.shape[1], dtype=bool), operator.mesh.edge_pixels]
+        )
+    solution = solve_linear_system(
+        q,
+        d,
+        positive_only=settings.positive_only,
+        fixed_zero=fixed_zero,
+        source_block=slice(dense.shape[1], None) if operator is not None else None,
+        passive_start=passive_start,
+    )
+    return _scored(dataset, model, solution, fixed, lens_columns, source_columns, operator, system)
+
+
+def _dense_light(dataset: FitDataset, model: LensModel) -> tuple[np.ndarray, ...]:
+    """The fixed light's blurred image, and the blurred columns of the lens-light
+    Gaussians and of the source Gaussians (empty when the model has none)."""
     fixed = (
         dataset.light_grid.blurred_image(list(model.fixed_light))
         if model.fixed_light
@@ -456,31 +488,26 @@ def fit(
         if model.lens_light
         else np.zeros((dataset.data.size, 0))
     )
-    source = model.source
     source_columns = (
-        source_light_columns(dataset, model.mass, source.sets)
-        if isinstance(source, MGESource)
+        source_light_columns(dataset, model.mass, model.source.sets)
+        if isinstance(model.source, MGESource)
         else np.zeros((dataset.data.size, 0))
     )
-    dense = np.hstack([lens_columns, source_columns])
-    n_dense = dense.shape[1]
-    operator = mapping = system = None
-    if isinstance(source, PixelizedSource):
-        system = dataset.repeated_source(model.mass, source)
-        operator = (
-            pixelized_operator(dataset, model.mass, source) if system is None else system.operator
-        )
-        mapping, h = operator.mapping, operator.regularization_matrix
-    if n_dense == 0 and operator is None:
-        raise ValueError("the model has no linear light: give it lens light or a source")
+    return fixed, lens_columns, source_columns
 
-    residual_data = dataset.data - fixed
+
+def _normal_equations(dataset, model, dense, fixed, operator, system):
+    """Curvature matrix Q (with the regularization and, on the Gaussian columns, the
+    ``mge_diagonal``) and data vector D of the linear unknowns [dense columns | source
+    pixels] (SPEC §6.1–6.2)."""
+    n_dense = dense.shape[1]
+    mapping = None if operator is None else operator.mapping
     d = data_vector(
         dense,
         mapping,
         dataset.source_psf_operator,
         dataset.inverse_variance,
-        residual_data,
+        dataset.data - fixed,
         None if model.fixed_light or mapping is None else dataset.blurred_weighted_data,
     )
     if system is None:
@@ -493,25 +520,19 @@ def fit(
             dense, mapping, dataset.tile_plan, dataset.inverse_variance, dense_terms=terms
         )
         if operator is not None:
-            q[n_dense:, n_dense:] += h.toarray()
+            q[n_dense:, n_dense:] += operator.regularization_matrix.toarray()
     else:
         q = system.curvature(dense, dataset)
-    q[np.arange(n_dense), np.arange(n_dense)] += settings.mge_diagonal
-    fixed_zero = None
-    if operator is not None:
-        if settings.positive_only and settings.force_edge_pixels_to_zero:
-            fixed_zero = np.concatenate([np.zeros(n_dense, dtype=bool), operator.mesh.edge_pixels])
-    solution = solve_linear_system(
-        q,
-        d,
-        positive_only=settings.positive_only,
-        fixed_zero=fixed_zero,
-        source_block=slice(n_dense, None) if operator is not None else None,
-        passive_start=passive_start,
-    )
+    q[np.arange(n_dense), np.arange(n_dense)] += dataset.settings.mge_diagonal
+    return q, d
 
+
+def _scored(dataset, model, solution, fixed, lens_columns, source_columns, operator, system):
+    """The :class:`FitResult` of a solution: images, χ², ln L and, for a pixelized
+    source, the log evidence and its terms (SPEC §7)."""
     x = solution.x
     n_lens = lens_columns.shape[1]
+    n_dense = n_lens + source_columns.shape[1]
     lens_light_image = lens_columns @ x[:n_lens] + fixed
     lensed_source_image = source_columns @ x[n_lens:n_dense]
     if operator is not None:
@@ -534,6 +555,7 @@ def fit(
     if operator is None:
         return FitResult(**common, log_evidence=log_like)
 
+    h = operator.regularization_matrix
     fluxes = x[n_dense:]
     regularization_term = float(fluxes @ (h @ fluxes))
     log_det_fh = solution.log_det_source

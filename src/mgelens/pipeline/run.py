@@ -280,6 +280,38 @@ def _solve(
             for problem, run_seed in zip(problems, seeds, strict=True)
         ],
     )
+    outputs = _sample_problems(problems, sampler, seeds, checkpoints, folder, lens_dir)
+    output = pool_runs(outputs)
+    best_run = int(np.argmax([run.log_likelihoods.max() for run in outputs]))
+    best_problem = problems[best_run]
+    phase = PhaseResult(
+        phase=best_problem.name,
+        space=best_problem.space,
+        output=output,
+        settings=_phase_settings(problems, outputs, best_run, settings, lens_dir),
+        input_checksums=checksums,
+    )
+    values = best_problem.space.values(output.max_likelihood())
+    best = fit(best_problem.dataset, best_problem.model.build(values))
+    record = fit_record(best, best_problem.model, values)
+    if isinstance(best.model.source, MGESource):
+        record["positions"] = image_positions(best, settings).describe()
+    _write_outputs(folder, phase, best, record, lens_dir.name)
+    for stale in folder.glob(f"{CHECKPOINT_PREFIX}*"):
+        stale.unlink()
+    _log_outcome(best_problem.name, lens_dir, folder, output, best)
+    return phase
+
+
+def _sample_problems(
+    problems: list[PhaseProblem],
+    sampler: SamplerSettings,
+    seeds: list[int],
+    checkpoints: list[Path],
+    folder: Path,
+    lens_dir: Path,
+) -> list[SamplerOutput]:
+    """One sampler run per problem (:func:`_sample_runs`), each logged as it is set up."""
     runs = []
     for problem, run_seed, checkpoint in zip(problems, seeds, checkpoints, strict=True):
         logger.info(
@@ -300,9 +332,19 @@ def _solve(
             reference_passive_set(problem),
         )
         runs.append((likelihood, problem.space, checkpoint, run_seed))
-    outputs = _sample_runs(runs, sampler, folder)
-    output = pool_runs(outputs)
-    best_run = int(np.argmax([run.log_likelihoods.max() for run in outputs]))
+    return _sample_runs(runs, sampler, folder)
+
+
+def _phase_settings(
+    problems: list[PhaseProblem],
+    outputs: list[SamplerOutput],
+    best_run: int,
+    settings: SlamSettings,
+    lens_dir: Path,
+) -> dict:
+    """The ``settings`` record of ``result.json``: the chain's settings and the model and
+    fit of the run holding the highest-likelihood sample, and each mesh's run when MASS
+    pooled several."""
     best_problem = problems[best_run]
     phase_settings = {
         "profile": settings.profile,
@@ -318,40 +360,31 @@ def _solve(
             _mesh_run_record(run_problem, run, k == best_run)
             for k, (run_problem, run) in enumerate(zip(problems, outputs, strict=True))
         ]
-    phase = PhaseResult(
-        phase=best_problem.name,
-        space=best_problem.space,
-        output=output,
-        settings=phase_settings,
-        input_checksums=checksums,
-    )
-    values = best_problem.space.values(output.max_likelihood())
-    best = fit(best_problem.dataset, best_problem.model.build(values))
-    record = fit_record(best, best_problem.model, values)
-    if isinstance(best.model.source, MGESource):
-        record["positions"] = image_positions(best, settings).describe()
-    _write_outputs(folder, phase, best, record, lens_dir.name)
-    for stale in folder.glob(f"{CHECKPOINT_PREFIX}*"):
-        stale.unlink()
+    return phase_settings
+
+
+def _log_outcome(
+    name: str, lens_dir: Path, folder: Path, output: SamplerOutput, best: FitResult
+) -> None:
+    """Log the phase's end, with a warning if its sampler did not converge."""
     if not output.converged:
         logger.warning(
             "phase %s of %s did not converge (%s): %s records converged: false, and later "
             "phases refuse it unless slam.allow_unconverged is true",
-            best_problem.name,
+            name,
             lens_dir,
             output.stop_reason,
             folder / RESULT_FILE,
         )
     logger.info(
         "phase %s done: ln Z = %.3f, max ln L = %.3f, %d calls (%d rejected), %.1f s",
-        best_problem.name,
+        name,
         output.log_evidence,
         best.log_evidence,
         output.n_calls,
         output.n_rejected,
         output.runtime,
     )
-    return phase
 
 
 def _kmeans_seed(problem: PhaseProblem) -> int:
