@@ -13,7 +13,7 @@ import numpy as np
 from common import median_time, peak_memory_mb, report, set_threads
 
 from mgelens.convolve import trimmed_psf
-from mgelens.fit import FitSettings
+from mgelens.fit_settings import FitSettings
 from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.light import LightGrid, MGESet, Sersic

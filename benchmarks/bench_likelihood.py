@@ -24,14 +24,8 @@ from common import median_time, peak_memory_mb, report, set_threads
 
 from mgelens import mass
 from mgelens.convolve import convolve_image
-from mgelens.fit import (
-    FitDataset,
-    FitSettings,
-    LensModel,
-    PixelizedSource,
-    fit,
-    pixelized_operator,
-)
+from mgelens.fit import FitDataset, LensModel, PixelizedSource, fit, pixelized_operator
+from mgelens.fit_settings import FitSettings
 from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres, sub_grid
 from mgelens.imaging import Imaging

@@ -49,7 +49,7 @@ from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.pipeline import models
 from mgelens.pipeline.problem import load_dataset
-from mgelens.pipeline.settings import profile_settings
+from mgelens.pipeline.settings import LensSpec, profile_settings
 from mgelens.source.image_mesh import floored_adapt_image, overlay_centres
 
 PHASES = ("sp", "spix1", "spix2", "light", "mass")
@@ -147,16 +147,16 @@ def brightest_centre(dataset, radius: float = 0.5) -> tuple[float, float]:
     return float(x[k]), float(y[k])
 
 
-def phase_calls(lens_dir: Path, settings, einstein_radius: float, n_calls: int, seed: int):
+def phase_calls(lens_dir: Path, settings, lens, einstein_radius: float, n_calls: int, seed: int):
     """{phase: (dataset, PhaseModel, [values per call], passive_start or None)}."""
     rng = np.random.default_rng(seed)
-    probe, _ = load_dataset(lens_dir, settings, settings.mask_centre)
+    probe, _ = load_dataset(lens_dir, settings, lens, lens.mask_centre)
     centre = brightest_centre(probe)
-    dataset, radius = load_dataset(lens_dir, settings, centre)
+    dataset, radius = load_dataset(lens_dir, settings, lens, centre)
     pixel = dataset.imaging.pixel_scale
-    values = nominal_values(centre, einstein_radius, settings.mge_sets)
+    values = nominal_values(centre, einstein_radius, lens.mge_sets)
     sp_specs = models.mge_specs(2, False, pixel, radius)
-    light_specs = models.mge_specs(settings.mge_sets, settings.point_set, pixel, radius)
+    light_specs = models.mge_specs(lens.mge_sets, lens.point_set, pixel, radius)
     ox, oy = overlay_centres(dataset.mask, pixel, settings.overlay_shape)
     overlay = models.MeshSourceModel(
         ox, oy, settings.spix1_regularization, settings.interpolation, settings.cross_offset
@@ -179,7 +179,7 @@ def phase_calls(lens_dir: Path, settings, einstein_radius: float, n_calls: int, 
         base = mass_values if phase == "mass" else values
         dataset_copy = replace(dataset, _columns_cache={}, _source_cache={})
         passive = None
-        if model.stable_unknowns and settings.positive_only:
+        if model.stable_unknowns and settings.fit.positive_only:
             passive = ~fit(dataset_copy, model.build(base)).solution.active_zero
         draws = [jittered(base, phase, rng) for _ in range(n_calls)]
         calls[phase] = (dataset_copy, model, draws, passive)
@@ -256,7 +256,9 @@ def main() -> None:
     parser.add_argument("--lens-dir", type=Path, required=True)
     parser.add_argument("--mask-radius", type=float, required=True, help="arcsec")
     parser.add_argument("--profile", default="quick", choices=("quick", "paper"))
-    parser.add_argument("--mge-sets", type=int, help="LIGHT/MASS extended sets (default: profile)")
+    parser.add_argument(
+        "--mge-sets", type=int, default=LensSpec.mge_sets, help="LIGHT/MASS extended sets"
+    )
     parser.add_argument("--no-point-set", action="store_true", help="LIGHT/MASS without it")
     parser.add_argument("--einstein-radius", type=float, help="nominal θ_E (arcsec)")
     parser.add_argument("--calls", type=int, default=15, help="timed calls per phase")
@@ -264,13 +266,12 @@ def main() -> None:
     parser.add_argument("--phases", nargs="+", default=list(PHASES), choices=PHASES)
     args = parser.parse_args()
     set_threads(args.threads)
-    settings = profile_settings(args.profile).with_overrides(mask_radius=args.mask_radius)
-    if args.mge_sets is not None:
-        settings = settings.with_overrides(mge_sets=args.mge_sets)
-    if args.no_point_set:
-        settings = settings.with_overrides(point_set=False)
+    settings = profile_settings(args.profile)
+    lens = LensSpec(
+        mask_radius=args.mask_radius, mge_sets=args.mge_sets, point_set=not args.no_point_set
+    )
     theta_e = args.einstein_radius or default_einstein_radius(args.lens_dir)
-    calls, dataset, centre = phase_calls(args.lens_dir, settings, theta_e, args.calls, seed=0)
+    calls, dataset, centre = phase_calls(args.lens_dir, settings, lens, theta_e, args.calls, seed=0)
     calls = {phase: calls[phase] for phase in args.phases}
     print(f"lens: {args.lens_dir.name}  profile: {args.profile}  threads: {args.threads}")
     print(

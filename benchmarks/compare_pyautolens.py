@@ -46,14 +46,8 @@ from bench_likelihood import (
 )
 from common import median_time, report, set_threads
 
-from mgelens.fit import (
-    FitDataset,
-    FitSettings,
-    LensModel,
-    PixelizedSource,
-    fit,
-    pixelized_operator,
-)
+from mgelens.fit import FitDataset, LensModel, PixelizedSource, fit, pixelized_operator
+from mgelens.fit_settings import FitSettings
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
 from mgelens.source.image_mesh import floored_adapt_image, overlay_centres
 from mgelens.source.regularization import ConstantSplit

@@ -1,12 +1,13 @@
 """LIGHT model choice by evidence (mgelens.pipeline.model_choice, rule choose_light) and
 the sample sheet's per-lens pixel scale."""
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 from astropy.io import fits
-from test_pipeline import MASK_RADIUS, mock_dir  # noqa: F401  (fixture)
+from test_pipeline import LENS, mock_dir  # noqa: F401  (fixture)
 
 from mgelens.cli import main
 from mgelens.imaging import ImagingError
@@ -19,7 +20,7 @@ from mgelens.pipeline.model_choice import (
     choose,
 )
 from mgelens.pipeline.phases import mass as mass_phase
-from mgelens.pipeline.settings import SettingsError, settings_from_mapping
+from mgelens.pipeline.settings import LensSpec, SettingsError, settings_from_mapping
 
 
 # -- candidates and labels ---------------------------------------------------------------
@@ -102,8 +103,7 @@ def capped_settings(**changes):
     iterations = {"sp": 40, "spix1": 15, "spix2": 10, "light": 15, "mass": 10}
     return settings_from_mapping(
         {
-            "mask_radius": MASK_RADIUS,
-            "lp_sub_size_centre": 4,
+            "fit": {"lp_sub_size_centre": 4},
             "source_pixels": 60,
             "overlay_shape": [8, 8],
             "allow_unconverged": True,
@@ -119,14 +119,15 @@ def candidate_run(mock_dir, tmp_path_factory):  # noqa: F811
     results = tmp_path_factory.mktemp("choice")
     settings = capped_settings()
     for phase in ("sp", "spix1", "spix2"):
-        run.run_phase(phase, mock_dir, results, settings, seed=1, threads=1)
+        run.run_phase(phase, mock_dir, results, settings, LENS, seed=1, threads=1)
     models = [LightModel(2, True), LightModel(2, False)]
     for model in models:
         run.run_phase(
             "light",
             mock_dir,
             results,
-            settings.with_overrides(mge_sets=model.mge_sets, point_set=model.point_set),
+            settings,
+            dataclasses.replace(LENS, mge_sets=model.mge_sets, point_set=model.point_set),
             seed=1,
             threads=1,
             folder_name=model.folder,
@@ -170,7 +171,7 @@ def test_adopt_copies_the_chosen_candidate_and_mass_reads_it(candidate_run, mock
     for name in ("result.json", "samples.csv", "model.fits", "phase.log"):
         assert (results / "light" / name).read_bytes() == (folder / name).read_bytes()
     # MASS fixes the lens light of light/, the chosen candidate's
-    problem = mass_phase.problem(mock_dir, results, capped_settings())
+    problem = mass_phase.problem(mock_dir, results, capped_settings(), LENS)
     names = {spec.name for spec in problem.model.lens_light}
     assert ("point" in names) == LightModel.from_label(chosen.label).point_set
     assert str(results / "light" / "result.json") in map(str, problem.inputs)
@@ -191,7 +192,7 @@ def test_choose_command_names_a_missing_candidate(candidate_run, tmp_path, caplo
 def test_a_phase_folder_must_be_one_name(mock_dir, tmp_path):  # noqa: F811
     for bad in ("../light", "a/b", ".."):
         with pytest.raises(ValueError, match="one folder name"):
-            run.run_phase("sp", mock_dir, tmp_path, capped_settings(), folder_name=bad)
+            run.run_phase("sp", mock_dir, tmp_path, capped_settings(), LENS, folder_name=bad)
 
 
 # -- pixel scale from the sheet ----------------------------------------------------------
@@ -206,10 +207,11 @@ def _headerless_folder(mock_dir, folder):  # noqa: F811
 def test_a_folder_without_pixel_scale_needs_the_settings_value(mock_dir, tmp_path):  # noqa: F811
     folder = _headerless_folder(mock_dir, tmp_path / "bare")
     with pytest.raises(ImagingError, match=r"`pixel_scale` column"):
-        problem.load_dataset(folder, capped_settings(), (0.0, 0.0))
+        problem.load_dataset(folder, capped_settings(), LENS, (0.0, 0.0))
     scale = fits.getheader(mock_dir / "data.fits")["PIXSCALE"]
-    dataset, _ = problem.load_dataset(folder, capped_settings(pixel_scale=scale), (0.0, 0.0))
-    reference, _ = problem.load_dataset(mock_dir, capped_settings(), (0.0, 0.0))
+    with_scale = dataclasses.replace(LENS, pixel_scale=scale)
+    dataset, _ = problem.load_dataset(folder, capped_settings(), with_scale, (0.0, 0.0))
+    reference, _ = problem.load_dataset(mock_dir, capped_settings(), LENS, (0.0, 0.0))
     assert dataset.imaging.pixel_scale == scale
     np.testing.assert_array_equal(dataset.mask, reference.mask)
     np.testing.assert_array_equal(dataset.data, reference.data)
@@ -217,5 +219,7 @@ def test_a_folder_without_pixel_scale_needs_the_settings_value(mock_dir, tmp_pat
 
 @pytest.mark.parametrize("value", [0.0, -0.05, "x"])
 def test_a_bad_pixel_scale_setting_is_named(value):
-    with pytest.raises(SettingsError, match=r"slam\.pixel_scale"):
+    with pytest.raises(SettingsError, match=r"pixel_scale must be a number > 0.*--pixel-scale"):
+        LensSpec(pixel_scale=value)
+    with pytest.raises(SettingsError, match=r"slam\.pixel_scale is set per lens"):
         capped_settings(pixel_scale=value)

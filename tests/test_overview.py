@@ -31,7 +31,7 @@ from mgelens.overview import (
     voronoi_edges,
 )
 from mgelens.pipeline import run
-from mgelens.pipeline.settings import settings_from_mapping
+from mgelens.pipeline.settings import LensSpec, settings_from_mapping
 from mgelens.plot.overview import (
     CONTOUR_RANGE,
     RESIDUAL_LIMIT,
@@ -44,6 +44,7 @@ from mgelens.source.mesh import VoronoiMesh
 
 PIXEL = 0.1
 MASK_RADIUS = 1.4
+LENS = LensSpec(mask_radius=MASK_RADIUS)
 SENTINEL = 1e8
 
 
@@ -236,8 +237,7 @@ def capped_run(mock_dir, tmp_path_factory):
     capped = {"method": "dynesty_static", "progress_every": 1e9}
     settings = settings_from_mapping(
         {
-            "mask_radius": MASK_RADIUS,
-            "lp_sub_size_centre": 4,
+            "fit": {"lp_sub_size_centre": 4},
             "overlay_shape": [8, 8],
             "allow_unconverged": True,
             "samplers": {
@@ -248,7 +248,7 @@ def capped_run(mock_dir, tmp_path_factory):
     )
     results = tmp_path_factory.mktemp("results")
     for phase in ("sp", "spix1"):
-        run.run_phase(phase, mock_dir, results, settings, seed=2, threads=1)
+        run.run_phase(phase, mock_dir, results, settings, LENS, seed=2, threads=1)
     return results
 
 

@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -29,6 +30,7 @@ from mgelens.pipeline.phases import spix1 as spix1_phase
 from mgelens.pipeline.phases import spix2 as spix2_phase
 from mgelens.pipeline.settings import (
     PHASES,
+    LensSpec,
     SettingsError,
     load_settings,
     profile_settings,
@@ -42,6 +44,8 @@ from mgelens.source.image_mesh import overlay_centres
 
 PIXEL = 0.1
 MASK_RADIUS = 1.4
+LENS = LensSpec(mask_radius=MASK_RADIUS)
+"""The small mock's lens spec (its truth.json holds another radius)."""
 SP_SPECS = models.mge_specs(2, False, PIXEL, MASK_RADIUS)
 
 SP_VALUES = {
@@ -341,29 +345,27 @@ def test_profiles_paper_and_quick():
     quick = profile_settings("quick")
     assert all(quick.samplers[p].n_live <= 60 for p in PHASES)
     assert 500 <= quick.source_pixels <= 800
-    assert quick.positive_only
+    assert quick.fit.positive_only
     assert quick.positions_penalty
     assert not paper.positions_penalty
-    assert (paper.psf_trim, quick.psf_trim) == (1e-10, 1e-4)
-    assert (paper.sub_size, quick.sub_size) == (4, 2)
+    assert (paper.fit.psf_trim, quick.fit.psf_trim) == (1e-10, 1e-4)
+    assert (paper.fit.sub_size, quick.fit.sub_size) == (4, 2)
     # quick: the continuous edge rule (SPEC §4 deviations, docs/slam.md), MASS on two meshes
-    assert (paper.edge_rule, quick.edge_rule) == ("anchor", "continuous")
-    assert (paper.force_edge_pixels_to_zero, quick.force_edge_pixels_to_zero) == (True, False)
+    assert (paper.fit.edge_rule, quick.fit.edge_rule) == ("anchor", "continuous")
+    assert (paper.fit.force_edge_pixels_to_zero, quick.fit.force_edge_pixels_to_zero) == (
+        True,
+        False,
+    )
     assert (paper.adaptive_signals, quick.adaptive_signals) == ("anchor", "weighted")
     assert (paper.mass_meshes, quick.mass_meshes) == (1, 2)
 
 
 def test_fit_settings_reach_the_fit(mock_dir):
     for trim, force_edge, rule in ((1e-10, True, "anchor"), (1e-4, False, "continuous")):
-        settings = settings_from_mapping(
-            {
-                "mask_radius": MASK_RADIUS,
-                "psf_trim": trim,
-                "force_edge_pixels_to_zero": force_edge,
-                "edge_rule": rule,
-            }
-        )
-        dataset, _ = problem.load_dataset(mock_dir, settings, (0.0, 0.0))
+        fit = {"psf_trim": trim, "force_edge_pixels_to_zero": force_edge, "edge_rule": rule}
+        settings = settings_from_mapping({"fit": fit})
+        dataset, _ = problem.load_dataset(mock_dir, settings, LENS, (0.0, 0.0))
+        assert dataset.settings is settings.fit
         assert dataset.settings.psf_trim == trim
         assert dataset.settings.force_edge_pixels_to_zero is force_edge
         assert dataset.settings.edge_rule == rule
@@ -372,14 +374,14 @@ def test_fit_settings_reach_the_fit(mock_dir):
 def test_sersic_lens_light_needs_its_solve_stated():
     """No setting silently changes another: 3×Sérsic without positive_only is refused
     (the default, true, is the MGE's; the paper's Sérsic runs were unconstrained)."""
-    assert settings_from_mapping({}).positive_only
-    with pytest.raises(SettingsError, match=r"sersic needs slam\.positive_only"):
+    assert settings_from_mapping({}).fit.positive_only
+    with pytest.raises(SettingsError, match=r"sersic needs slam\.fit\.positive_only"):
         settings_from_mapping({"lens_light_model": "sersic"}, origin="run.yaml")
-    unconstrained = {"lens_light_model": "sersic", "positive_only": False}
-    assert not settings_from_mapping(unconstrained).positive_only
-    explicit = {"lens_light_model": "sersic", "positive_only": True}
-    assert settings_from_mapping(explicit).positive_only
-    assert not settings_from_mapping({"positive_only": False}).positive_only
+    unconstrained = {"lens_light_model": "sersic", "fit": {"positive_only": False}}
+    assert not settings_from_mapping(unconstrained).fit.positive_only
+    explicit = {"lens_light_model": "sersic", "fit": {"positive_only": True}}
+    assert settings_from_mapping(explicit).fit.positive_only
+    assert not settings_from_mapping({"fit": {"positive_only": False}}).fit.positive_only
 
 
 def test_settings_from_yaml_override_the_profile(tmp_path):
@@ -388,16 +390,16 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         "samples: config/lenses.tsv\n"
         "slam:\n"
         "  profile: paper\n"
-        "  positive_only: false\n"
-        "  mge_sets: 6\n"
+        "  fit: {positive_only: false, sub_size: 3}\n"
         "  overlay_shape: [30, 30]\n"
         "  samplers:\n"
         "    mass: {n_live: 77}\n"
     )
     settings = load_settings(path)
     assert settings.profile == "paper"
-    assert not settings.positive_only
-    assert settings.mge_sets == 6
+    assert not settings.fit.positive_only
+    assert settings.fit.sub_size == 3
+    assert settings.fit.lp_sub_size == profile_settings("paper").fit.lp_sub_size
     assert settings.overlay_shape == (30, 30)
     assert settings.samplers["mass"].n_live == 77
     assert settings.samplers["mass"].method == "nautilus"
@@ -405,9 +407,11 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
     assert load_settings(path, profile="quick").samplers["sp"].n_live < 200
     assert load_settings(None, "paper") == profile_settings("paper")
     # --slam overrides (JSON from the workflow) merge over the file, sampler by sampler
-    merged = load_settings(path, None, {"mge_sets": 4, "samplers": {"mass": {"dlogz": 2.0}}})
-    assert merged.mge_sets == 4
-    assert not merged.positive_only
+    merged = load_settings(
+        path, None, {"fit": {"sub_size": 2}, "samplers": {"mass": {"dlogz": 2.0}}}
+    )
+    assert merged.fit.sub_size == 2
+    assert not merged.fit.positive_only
     assert merged.samplers["mass"].n_live == 77
     assert merged.samplers["mass"].dlogz == 2.0
     only = load_settings(None, None, {"profile": "paper", "source_pixels": 900})
@@ -423,27 +427,28 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"n_gausians": 20}, "slam.n_gausians"),
         ({"samplers": {"sp": {"nlive": 3}}}, "slam.samplers.sp.*nlive"),
         ({"samplers": {"source": {}}}, "slam.samplers.source"),
-        ({"mge_sets": 3}, "mge_sets"),
+        ({"mge_sets": 6}, r"slam\.mge_sets is set per lens.*--mge-sets"),
+        ({"mask_radius": 2}, r"slam\.mask_radius is set per lens.*mask_radius column"),
+        ({"positive_only": False}, r"slam\.positive_only is a fit setting: .*slam\.fit\."),
+        ({"fit": {"sub_sise": 2}}, r"unknown key slam\.fit\.sub_sise"),
+        ({"fit": 2}, r"slam\.fit must be a mapping"),
         ({"profile": "fast"}, "fast"),
-        ({"positive_only": "false"}, "positive_only must be true or false, got 'false'"),
-        ({"force_edge_pixels_to_zero": 0}, "force_edge_pixels_to_zero must be true or false"),
+        ({"fit": {"positive_only": "false"}}, "positive_only must be true or false, got 'false'"),
+        ({"fit": {"force_edge_pixels_to_zero": 0}}, "force_edge_pixels_to_zero must be true or"),
         ({"adaptive_signals": "mean"}, "adaptive_signals must be one of"),
-        ({"edge_rule": "smooth"}, "edge_rule must be one of"),
+        ({"fit": {"edge_rule": "smooth"}}, "edge_rule must be one of"),
         ({"mass_meshes": 0}, "mass_meshes must be an integer >= 1, got 0"),
         ({"mass_meshes": 1.5}, "mass_meshes must be an integer >= 1"),
         ({"mass_meshes": True}, "mass_meshes must be an integer >= 1"),
         # issue 33: every value is checked where its key is, named by its dotted path
-        ({"sub_size": "2"}, r"slam\.sub_size must be an integer >= 1, got '2'"),
-        ({"sub_size": 0}, r"slam\.sub_size must be an integer >= 1, got 0"),
-        ({"mask_centre": [1]}, r"slam\.mask_centre must be two numbers \(x, y\) in arcsec"),
+        ({"fit": {"sub_size": "2"}}, r"slam\.fit\.sub_size must be an integer >= 1, got '2'"),
+        ({"fit": {"sub_size": 0}}, r"slam\.fit\.sub_size must be an integer >= 1, got 0"),
         ({"kmeans_seed": "x"}, r"slam\.kmeans_seed must be an integer >= 0, got 'x'"),
         ({"positions_factor": "big"}, r"slam\.positions_factor must be a number > 0, got 'big'"),
-        ({"lp_centre_radius": -1}, r"slam\.lp_centre_radius must be a number >= 0, got -1"),
+        ({"fit": {"lp_centre_radius": -1}}, r"slam\.fit\.lp_centre_radius must be a number >="),
         ({"source_pixels": "many"}, r"slam\.source_pixels must be an integer >= 3, got 'many'"),
         ({"overlay_shape": [24]}, r"slam\.overlay_shape must be two integers >= 2"),
-        ({"psf_trim": 1}, r"slam\.psf_trim must be a number in \[0, 1\), got 1"),
-        ({"mask_radius": "3"}, r"slam\.mask_radius must be a number > 0, got '3'"),
-        ({"mge_sets": "4"}, r"slam\.mge_sets must be an integer >= 1, got '4'"),
+        ({"fit": {"psf_trim": 1}}, r"slam\.fit\.psf_trim must be a number in \[0, 1\), got 1"),
         ({"allow_unconverged": "yes"}, r"slam\.allow_unconverged must be true or false"),
         ({"profile": 3}, r"slam\.profile must be one of \['paper', 'quick'\], got 3"),
         ({"samplers": 3}, r"slam\.samplers must be a mapping"),
@@ -456,6 +461,36 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
 def test_invalid_settings_name_the_key(section, message):
     with pytest.raises(SettingsError, match=message):
         settings_from_mapping(section)
+
+
+@pytest.mark.parametrize(
+    ("values", "message"),
+    [
+        ({"mge_sets": 3}, r"mge_sets must be one of \[2, 4, 6\], got 3 \(--mge-sets, or the "),
+        ({"mge_sets": "4"}, r"mge_sets must be an integer >= 1, got '4'"),
+        ({"mask_radius": "3"}, r"mask_radius must be a number > 0, got '3' \(--mask-radius"),
+        ({"mask_radius": 0}, r"mask_radius must be a number > 0, got 0"),
+        ({"mask_centre": [1]}, r"mask_centre must be two numbers \(x, y\) in arcsec"),
+        ({"pixel_scale": -0.05}, r"pixel_scale must be a number > 0.*--pixel-scale"),
+        ({"point_set": "yes"}, r"point_set must be true or false"),
+    ],
+)
+def test_invalid_lens_values_name_the_option(values, message):
+    with pytest.raises(SettingsError, match=message):
+        LensSpec(**values)
+
+
+def test_lens_spec_is_recorded_and_read_back(tmp_path):
+    """result.json records the chain's settings (fit nested) and the lens spec apart, and
+    records written before they were apart (flat ``slam``) read into the same two."""
+    settings = settings_from_mapping({"fit": {"sub_size": 3}, "source_pixels": 600})
+    lens = LensSpec(mask_radius=1.5, mask_centre=(0.1, -0.2), mge_sets=6, point_set=False)
+    phase = SimpleNamespace(settings={"slam": settings.to_dict(), "lens": lens.to_dict()})
+    assert records.recorded_settings(phase) == (settings, lens)
+    flat = {k: v for k, v in settings.to_dict().items() if k != "fit"}
+    flat.update(settings.fit.to_dict())
+    flat.update(lens.to_dict())
+    assert records.recorded_settings(SimpleNamespace(settings={"slam": flat})) == (settings, lens)
 
 
 def test_sampler_for_raises_dynesty_live_points_to_its_minimum():
@@ -494,14 +529,12 @@ def mock_dir(tmp_path_factory):
 
 def tiny_settings(**sampler):
     sp = {"n_live": 36, "dlogz": 0.5, "progress_every": 1e9, **sampler}
-    return settings_from_mapping(
-        {"mask_radius": MASK_RADIUS, "lp_sub_size_centre": 4, "samplers": {"sp": sp}}
-    )
+    return settings_from_mapping({"fit": {"lp_sub_size_centre": 4}, "samplers": {"sp": sp}})
 
 
 def test_model_fits_extensions_and_units(mock_dir, tmp_path):
     settings = tiny_settings()
-    problem = sp_phase.problem(mock_dir, tmp_path, settings)
+    problem = sp_phase.problem(mock_dir, tmp_path, settings, LENS)
     values = problem.space.values(problem.space.vector(SP_VALUES))
     result = fit(problem.dataset, problem.model.build(values))
     path = tmp_path / "model.fits"
@@ -531,7 +564,7 @@ def test_model_fits_extensions_and_units(mock_dir, tmp_path):
 
 
 def test_pixelized_products_and_adapt_image(mock_dir, tmp_path):
-    problem = sp_phase.problem(mock_dir, tmp_path, tiny_settings())
+    problem = sp_phase.problem(mock_dir, tmp_path, tiny_settings(), LENS)
     dataset = problem.dataset
     x, y = overlay_centres(dataset.mask, PIXEL, (12, 12))
     source = models.MeshSourceModel(x, y, "constant")
@@ -549,13 +582,13 @@ def test_pixelized_products_and_adapt_image(mock_dir, tmp_path):
 # -- phases end to end ------------------------------------------------------------------
 def test_missing_earlier_phase_is_named(mock_dir, tmp_path):
     with pytest.raises(records.PhaseInputError, match=r"sp/result.json not found"):
-        run.run_phase("spix1", mock_dir, tmp_path, tiny_settings())
+        run.run_phase("spix1", mock_dir, tmp_path, tiny_settings(), LENS)
 
 
 @pytest.fixture(scope="module")
 def sp_run(mock_dir, tmp_path_factory):
     results = tmp_path_factory.mktemp("results")
-    result = run.run_phase("sp", mock_dir, results, tiny_settings(), seed=3, threads=1)
+    result = run.run_phase("sp", mock_dir, results, tiny_settings(), LENS, seed=3, threads=1)
     return results, result
 
 
@@ -586,23 +619,27 @@ def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):
         {"interpolation": "nearest"},
         {"overlay_shape": (20, 20)},
         {"positions_penalty": False},
-        {"mask_radius": 1.2},
-        {"sub_size": 3},
+        {"lens": {"mask_radius": 1.2}},
+        {"fit": {"sub_size": 3}},
     ],
 )
 def test_checkpoint_fingerprint_follows_every_input_of_the_likelihood(sp_run, mock_dir, changes):
     """A checkpoint written for one likelihood must not resume another (SPix1 here)."""
     results, _ = sp_run
 
-    def fingerprint(settings):
-        problem = spix1_phase.problem(mock_dir, results, settings)
+    def fingerprint(settings, lens=LENS):
+        problem = spix1_phase.problem(mock_dir, results, settings, lens)
         sampler = run.sampler_for(settings.samplers["spix1"], problem.space.n_free)
         return run.checkpoint_fingerprint(problem, sampler, 0, {})
 
     base = tiny_settings()
     assert base.positions_penalty
     assert fingerprint(base) == fingerprint(tiny_settings())
-    assert fingerprint(dataclasses.replace(base, **changes)) != fingerprint(base)
+    changes = dict(changes)
+    lens = dataclasses.replace(LENS, **changes.pop("lens", {}))
+    fit_changes = changes.pop("fit", {})
+    changed = dataclasses.replace(base, fit=dataclasses.replace(base.fit, **fit_changes), **changes)
+    assert fingerprint(changed, lens) != fingerprint(base)
 
 
 def test_lens_light_and_mass_models_rebuild_from_json(sp_run):
@@ -633,14 +670,14 @@ def test_interrupted_phase_resumes_to_the_uninterrupted_result(sp_run, mock_dir,
     config = tmp_path / "config.yaml"
     config.write_text(
         "slam:\n"
-        f"  mask_radius: {MASK_RADIUS}\n"
-        "  lp_sub_size_centre: 4\n"
+        "  fit: {lp_sub_size_centre: 4}\n"
         "  samplers:\n"
         "    sp: {n_live: 36, dlogz: 0.5, progress_every: 1000000000, checkpoint_every: 0.2}\n"
     )
     results = tmp_path / "results"
     command = [sys.executable, "-m", "mgelens", "phase", "sp", "--lens-dir", str(mock_dir)]
     command += ["--results", str(results), "--config", str(config), "--seed", "3"]
+    command += ["--mask-radius", str(MASK_RADIUS)]
     process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 60
@@ -654,12 +691,11 @@ def test_interrupted_phase_resumes_to_the_uninterrupted_result(sp_run, mock_dir,
     assert not (results / "sp" / "result.json").exists()
     settings = settings_from_mapping(
         {
-            "mask_radius": MASK_RADIUS,
-            "lp_sub_size_centre": 4,
+            "fit": {"lp_sub_size_centre": 4},
             "samplers": {"sp": {"n_live": 36, "dlogz": 0.5, "progress_every": 1e9}},
         }
     )
-    resumed = run.run_phase("sp", mock_dir, results, settings, seed=3, threads=1)
+    resumed = run.run_phase("sp", mock_dir, results, settings, LENS, seed=3, threads=1)
     assert resumed.output.n_resumes == 1
     np.testing.assert_array_equal(resumed.output.samples, reference.output.samples)
     np.testing.assert_array_equal(resumed.output.log_weights, reference.output.log_weights)
@@ -728,15 +764,13 @@ def test_isophotes_of_a_phase_take_the_imaging_pixel_scale(sp_run, mock_dir, tmp
 
 
 # -- the 3×Sérsic chain -------------------------------------------------------------------
-def sersic_settings(**changes):
+def sersic_settings(positive_only=False, **changes):
     capped = {"progress_every": 1e9, "n_live": 12}
     iterations = {"sp": 60, "spix1": 20, "spix2": 15, "light": 20, "mass": 20}
     return settings_from_mapping(
         {
-            "mask_radius": MASK_RADIUS,
-            "lp_sub_size_centre": 4,
+            "fit": {"lp_sub_size_centre": 4, "positive_only": positive_only},
             "lens_light_model": "sersic",
-            "positive_only": False,
             "source_pixels": 60,
             "overlay_shape": [8, 8],
             "allow_unconverged": True,
@@ -756,7 +790,7 @@ def sersic_run(mock_dir, tmp_path_factory):
     results = tmp_path_factory.mktemp("sersic")
     settings = sersic_settings()
     for phase in PHASES:
-        run.run_phase(phase, mock_dir, results, settings, seed=1, threads=1)
+        run.run_phase(phase, mock_dir, results, settings, LENS, seed=1, threads=1)
     return results
 
 
@@ -795,7 +829,7 @@ def test_a_phase_refuses_an_unconverged_earlier_phase(sersic_run, mock_dir, tmp_
     settings = sersic_settings(allow_unconverged=False)
     message = r"sp/result\.json is not converged \(stopped at max_iterations = 60.*allow_unconv"
     with pytest.raises(records.PhaseInputError, match=message):
-        run.run_phase("spix1", mock_dir, tmp_path, settings)
+        run.run_phase("spix1", mock_dir, tmp_path, settings, LENS)
     assert not (tmp_path / "spix1" / "result.json").exists()
     assert problem.read_phase(tmp_path, "sp", allow_unconverged=True).result.phase == "sp"
 
@@ -809,7 +843,7 @@ def test_sersic_chain_fixes_sps_sersics_in_the_spix_phases(sersic_run, mock_dir)
             assert fixed[key] == pytest.approx(solved[key])
     # the lens light of SPix1/SPix2 is SP's solved Sérsic light, subtracted unchanged (SP's
     # own image differs only by its over-sampling centre, the prior centre (0, 0))
-    dataset = spix1_phase.problem(mock_dir, sersic_run, sersic_settings()).dataset
+    dataset = spix1_phase.problem(mock_dir, sersic_run, sersic_settings(), LENS).dataset
     expected = dataset.light_grid.blurred_image(
         list(records.lens_light_profiles(sersic_run / "sp"))
     )
@@ -853,7 +887,7 @@ def test_adaptive_signals_setting_reaches_the_pixelized_phases(sersic_run, mock_
 
 def test_sersic_and_mge_results_do_not_mix(sersic_run, mock_dir):
     with pytest.raises(records.PhaseInputError, match="lens_light_model = 'sersic'"):
-        spix1_phase.problem(mock_dir, sersic_run, sersic_settings(lens_light_model="mge"))
+        spix1_phase.problem(mock_dir, sersic_run, sersic_settings(lens_light_model="mge"), LENS)
 
 
 def test_isophotes_of_a_sersic_phase(sersic_run, mock_dir, tmp_path):
@@ -872,9 +906,9 @@ def test_nnls_warm_start_of_a_phase_changes_no_value(sersic_run, mock_dir, monke
     at the prior medians with the SIE's slope 2; the values match cold starts to rounding.
     SPix2's k-means mesh moves with its samples, so it gets no warm start."""
     settings = sersic_settings(positive_only=True)
-    spix2 = spix2_phase.problem(mock_dir, sersic_run, settings)
+    spix2 = spix2_phase.problem(mock_dir, sersic_run, settings, LENS)
     assert run.reference_passive_set(spix2) is None
-    problem = mass_phase.problem(mock_dir, sersic_run, settings)
+    problem = mass_phase.problem(mock_dir, sersic_run, settings, LENS)
     slopes = []
 
     def recording_fit(dataset, model, *arguments):
@@ -925,7 +959,7 @@ def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, moc
     assert meshes[0]["median"] != meshes[1]["median"]
     # the written fit is the max-likelihood sample refitted on its own mesh
     settings = sersic_settings(kmeans_seed=holder[0]["kmeans_seed"], mass_meshes=1)
-    problem = mass_phase.problem(mock_dir, sersic_run, settings)
+    problem = mass_phase.problem(mock_dir, sersic_run, settings, LENS)
     values = problem.space.values(
         table.loc[int(np.argmax(table["log_likelihood"])), list(problem.space.free_names)].to_numpy(
             dtype=float
@@ -935,7 +969,7 @@ def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, moc
     refit = fit(problem.dataset, problem.model.build(values))
     assert refit.log_evidence == pytest.approx(written, abs=1e-6)
     other = sersic_settings(kmeans_seed=1 - holder[0]["kmeans_seed"], mass_meshes=1)
-    problem = mass_phase.problem(mock_dir, sersic_run, other)
+    problem = mass_phase.problem(mock_dir, sersic_run, other, LENS)
     elsewhere = fit(problem.dataset, problem.model.build(values))
     assert abs(elsewhere.log_evidence - written) > 1e-3
 
@@ -950,7 +984,7 @@ def test_mass_meshes_sampled_side_by_side_draw_the_same_samples(sersic_run, mock
     settings = sersic_settings()
     mass = dataclasses.replace(settings.samplers["mass"], n_processes=2)
     settings = dataclasses.replace(settings, samplers={**settings.samplers, "mass": mass})
-    run.run_phase("mass", mock_dir, results, settings, seed=1, threads=1)
+    run.run_phase("mass", mock_dir, results, settings, LENS, seed=1, threads=1)
     side_by_side = pd.read_csv(results / "mass" / "samples.csv")
     one_process = pd.read_csv(sersic_run / "mass" / "samples.csv")
     pd.testing.assert_frame_equal(side_by_side, one_process, check_exact=True)

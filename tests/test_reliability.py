@@ -9,7 +9,7 @@ from mgelens.cli import main
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging, ImagingError
 from mgelens.pipeline import problem
-from mgelens.pipeline.settings import settings_from_mapping
+from mgelens.pipeline.settings import LensSpec, settings_from_mapping
 from mgelens.sheet import SheetError, read_sample_sheet
 
 PIXEL = 0.1
@@ -74,26 +74,26 @@ def test_unfittable_inputs_are_refused_before_sampling(tmp_path, caplog, changes
 
 
 def test_the_mask_circle_may_fill_the_image_but_not_pass_it(lens):
-    settings = settings_from_mapping({"mask_radius": SIZE * PIXEL / 2})
-    dataset, _ = problem.load_dataset(lens, settings, (0.0, 0.0))
+    settings = settings_from_mapping({})
+    filling = LensSpec(mask_radius=SIZE * PIXEL / 2)
+    dataset, _ = problem.load_dataset(lens, settings, filling, (0.0, 0.0))
     assert (~dataset.mask).sum() > 1000
-    moved = settings_from_mapping({"mask_radius": 1.0, "mask_centre": [1.2, 0.0]})
+    moved = LensSpec(mask_radius=1.0, mask_centre=(1.2, 0.0))
     with pytest.raises(ImagingError, match=r"at most 0\.85″"):
-        problem.load_dataset(lens, moved, (0.0, 0.0))
+        problem.load_dataset(lens, settings, moved, (0.0, 0.0))
 
 
 def test_nan_outside_the_fit_circle_is_accepted_and_inside_it_named(tmp_path):
     data = lens_arrays()["data"]
     data[0, 0] = np.nan  # the corner, 2.8″ from the centre
     outside = lens_folder(tmp_path / "outside", data=data)
-    dataset, _ = problem.load_dataset(
-        outside, settings_from_mapping({"mask_radius": RADIUS}), (0, 0)
-    )
+    lens_spec = LensSpec(mask_radius=RADIUS)
+    dataset, _ = problem.load_dataset(outside, settings_from_mapping({}), lens_spec, (0, 0))
     assert np.isfinite(dataset.data).all()
     data[20, 21] = np.inf
     inside = lens_folder(tmp_path / "inside", data=data)
     with pytest.raises(ImagingError) as error:
-        problem.load_dataset(inside, settings_from_mapping({"mask_radius": RADIUS}), (0, 0))
+        problem.load_dataset(inside, settings_from_mapping({}), lens_spec, (0, 0))
     assert str(error.value).startswith(f"{inside / 'data.fits'}: data has 1 NaN/inf values at")
     assert "unmasked pixels (first at row 20, col 21), which the fit uses" in str(error.value)
 
@@ -108,8 +108,15 @@ def test_a_psf_with_a_shallow_negative_dip_is_accepted():
 @pytest.mark.parametrize(
     ("slam", "message"),
     [
-        ('{"sub_size": "2"}', "--slam: slam.sub_size must be an integer >= 1, got '2'"),
-        ('{"mask_centre": [1]}', "--slam: slam.mask_centre must be two numbers"),
+        (
+            '{"fit": {"sub_size": "2"}}',
+            "--slam: slam.fit.sub_size must be an integer >= 1, got '2'",
+        ),
+        (
+            '{"mask_centre": [1]}',
+            "--slam: slam.mask_centre is set per lens, not in slam: settings: give it with "
+            "--mask-centre",
+        ),
         ('{"samplers": {"sp": {"n_live": "many"}}}', "slam.samplers.sp.n_live must be"),
     ],
 )

@@ -19,7 +19,7 @@ from mgelens.mass import SIE, ExternalShear, ray_trace
 from mgelens.pipeline import models, run, sp_start
 from mgelens.pipeline.parameters import width_of
 from mgelens.pipeline.phases import sp as sp_phase
-from mgelens.pipeline.settings import profile_settings, settings_from_mapping
+from mgelens.pipeline.settings import LensSpec, profile_settings, settings_from_mapping
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
 from mgelens.search.priors import TruncatedGaussian, Uniform, passed_prior
@@ -27,6 +27,7 @@ from mgelens.search.priors import TruncatedGaussian, Uniform, passed_prior
 ROOT = Path(__file__).resolve().parents[1]
 PIXEL = 0.1
 MASK_RADIUS = 2.0
+LENS = LensSpec(mask_radius=MASK_RADIUS)
 
 
 def test_arc_mass_recovers_the_sie_shear_and_source_that_made_the_arcs():
@@ -81,8 +82,7 @@ def mock_folder(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def mock_problem(mock_folder):
-    settings = settings_from_mapping({"mask_radius": MASK_RADIUS})
-    return sp_phase.problem(mock_folder, mock_folder, settings)
+    return sp_phase.problem(mock_folder, mock_folder, settings_from_mapping({}), LENS)
 
 
 def _search(problem):
@@ -140,7 +140,8 @@ def test_started_space_passes_each_free_parameter_with_slams_width(mock_problem,
 
 def test_lens_light_alone_has_no_arcs_and_keeps_the_anchor_priors(tmp_path):
     folder = _mock_folder(tmp_path, noise_factor=3.0, with_source=False)
-    problem = sp_phase.problem(folder, folder, settings_from_mapping({"mask_radius": 2.0}))
+    lens = LensSpec(mask_radius=2.0)
+    problem = sp_phase.problem(folder, folder, settings_from_mapping({}), lens)
     start = _search(problem)
     assert start.values is None
     assert start.arcs is None
@@ -179,21 +180,21 @@ def test_sp_phase_samples_the_started_priors_and_reuses_its_start(
     passed from it; a rerun reads it back instead of searching again (same priors, so a
     checkpoint would resume). The sampler is capped: only the plumbing is tested here."""
     settings = settings_from_mapping(
-        {"mask_radius": MASK_RADIUS, "allow_unconverged": True, "sp_start": "search",
+        {"allow_unconverged": True, "sp_start": "search",
          "samplers": {"sp": {"n_live": 36, "max_calls": 200, "progress_every": 1e9}}}
     )  # fmt: skip
-    result = run.run_phase("sp", mock_folder, tmp_path, settings)
+    result = run.run_phase("sp", mock_folder, tmp_path, settings, LENS)
     recorded = json.loads((tmp_path / "sp" / sp_start.START_FILE).read_text())
     assert recorded["start"]["values"] == pytest.approx(mock_start.values)
     theta = result.space.parameter("mass.einstein_radius").prior
     assert theta.mean == pytest.approx(mock_start.values["mass.einstein_radius"])
     assert theta.sigma == pytest.approx(0.25 * theta.mean)
     with caplog.at_level(logging.INFO, logger="mgelens.pipeline.sp_start"):
-        again = run.run_phase("sp", mock_folder, tmp_path, settings)
+        again = run.run_phase("sp", mock_folder, tmp_path, settings, LENS)
     assert "SP start read from" in caplog.text
     assert again.space.to_dict() == result.space.to_dict()
     prior = dataclasses.replace(settings, sp_start="prior")
-    anchor = run.run_phase("sp", mock_folder, tmp_path / "prior", prior).space
+    anchor = run.run_phase("sp", mock_folder, tmp_path / "prior", prior, LENS).space
     assert anchor.parameter("mass.einstein_radius").prior == models.EINSTEIN_RADIUS_PRIOR
     assert not (tmp_path / "prior" / "sp" / sp_start.START_FILE).exists()
 

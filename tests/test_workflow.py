@@ -179,7 +179,10 @@ SHEET_HEADER = "lens\tkind\tmock\tinput\tmask_radius\tmge_sets\tpoint_set\tz_len
         ("data_dir: /nowhere\n", "R1\treal\t\tslacsX\t3.0\t2\tno\t0.2\t0.6\n",
          "real lens 'R1': data.fits, noise_map.fits, psf.fits not found in /nowhere/slacsX"),
         ("slam:\n  mge_sets: 6\n", None,
-         "slam.mge_sets is set per lens by the sample sheet's column of that name"),
+         "slam.mge_sets is set per lens, not in slam: settings: give it with --mge-sets, "
+         "or the sample sheet's mge_sets column"),
+        ("slam:\n  sub_size: 2\n", None,
+         "slam.sub_size is a fit setting: give it as slam.fit.sub_size"),
         ("", "M1\tmock\tM1\t\t1.8\t4\tyes\t0.28\n", "sheet.tsv: Error validating row 0"),
     ],
 )  # fmt: skip
@@ -239,11 +242,14 @@ def test_the_paper_mock_comparison_is_nine_rows_each_with_its_lens_light_model(t
     )
     assert result.returncode == 0, result.stderr
     output = result.stdout + result.stderr
-    slam = '--slam \'{{"lens_light_model": "{}", "positive_only": {}, "profile": "quick"}}\''
+    slam = (
+        '--slam \'{{"fit": {{"positive_only": {}}}, "lens_light_model": "{}", '
+        '"profile": "quick"}}\''
+    )
     assert "--results results/M1 " in output
-    assert slam.format("mge", "true") in output
-    assert slam.format("mge", "false") in output
-    assert slam.format("sersic", "false") in output
+    assert slam.format("true", "mge") in output
+    assert slam.format("false", "mge") in output
+    assert slam.format("false", "sersic") in output
     whole = snakemake("-n", "--configfile", "config/paper_mocks.yaml", workdir=tmp_path)
     counts = job_counts(whole.stdout + whole.stderr)
     assert counts["simulate_mock"] == 9
@@ -261,11 +267,13 @@ def test_a_lens_light_column_and_a_slam_lens_light_setting_contradict(tmp_path):
     (tmp_path / "sheet.tsv").write_text(
         header + "M1\tmock\tM1\t\t1.8\t4\tyes\tpn_mge\t0.28\t0.98\n"
     )
-    config = f"samples: {tmp_path / 'sheet.tsv'}\nslam:\n  positive_only: false\n"
+    config = f"samples: {tmp_path / 'sheet.tsv'}\nslam:\n  fit: {{positive_only: false}}\n"
     (tmp_path / "config.yaml").write_text(config)
     result = snakemake("-n", "--configfile", str(tmp_path / "config.yaml"), workdir=tmp_path)
     assert result.returncode != 0
-    assert "slam.positive_only contradicts the `lens_light` column" in result.stdout + result.stderr
+    assert "slam.fit.positive_only contradicts the `lens_light` column" in (
+        result.stdout + result.stderr
+    )
 
 
 def test_one_phases_sampler_settings_reach_that_phase_only(tmp_path):

@@ -29,22 +29,13 @@ try:  # stop before building the DAG if the slam: section is wrong, naming the k
     settings_from_mapping(config["slam"], origin="config")
 except SettingsError as error:
     raise WorkflowError(str(error)) from None
-SHEET_SETTINGS = ("mask_radius", "pixel_scale", "mge_sets", "point_set")
-"""slam: fields that the sample sheet sets per lens (columns of the same names)."""
-_sheet_keys = [key for key in SHEET_SETTINGS if key in config["slam"]]
-if _sheet_keys:
-    raise WorkflowError(
-        f"config: slam.{_sheet_keys[0]} is set per lens "
-        f"by the sample sheet's column of that name ({', '.join(SHEET_SETTINGS)}); "
-        "remove it from the config's slam: section and edit the sheet instead"
-    )
 
 REPO = Path(workflow.basedir)
 
 LENS_LIGHT_SETTINGS = {
-    "nn_mge": {"positive_only": True, "lens_light_model": "mge"},
-    "pn_mge": {"positive_only": False, "lens_light_model": "mge"},
-    "sersic": {"positive_only": False, "lens_light_model": "sersic"},
+    "nn_mge": {"lens_light_model": "mge", "fit": {"positive_only": True}},
+    "pn_mge": {"lens_light_model": "mge", "fit": {"positive_only": False}},
+    "sersic": {"lens_light_model": "sersic", "fit": {"positive_only": False}},
 }
 """slam: settings of each value of the sheet's `lens_light` column (empty: nn_mge)."""
 
@@ -76,7 +67,9 @@ except WorkflowError as error:
     raise WorkflowError(f"sample sheet {SAMPLE_SHEET}: {error}") from None
 DATA_DIR = repo_path(config["data_dir"])
 if "lens_light" in LENSES.columns:
-    _light_keys = [key for key in LENS_LIGHT_SETTINGS["nn_mge"] if key in config["slam"]]
+    _light_keys = [key for key in ("lens_light_model",) if key in config["slam"]] + [
+        f"fit.{key}" for key in ("positive_only",) if key in (config["slam"].get("fit") or {})
+    ]
     if _light_keys:
         raise WorkflowError(
             f"config: slam.{_light_keys[0]} contradicts the `lens_light` column of the sample "
@@ -436,7 +429,11 @@ def phase_settings(wildcards) -> str:
     """The config's slam: section as JSON, with the lens's `lens_light` settings
     (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
     changing one phase's sampler reruns that phase (and the phases after it) only."""
-    section = {**config["slam"], **lens_light_settings(wildcards.lens)}
+    light = lens_light_settings(wildcards.lens)
+    section = {**config["slam"], **light}
+    fit = {**(config["slam"].get("fit") or {}), **light.get("fit", {})}
+    if fit:
+        section["fit"] = fit
     samplers = section.pop("samplers", None) or {}
     phase = phase_name(wildcards)
     if phase in samplers:

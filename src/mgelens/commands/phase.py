@@ -12,8 +12,10 @@ The phase reads the imaging of ``--lens-dir`` and the earlier phases' folders un
 phase.log; spix1 also adapt_image.fits). Settings: the ``--profile`` defaults ("quick"
 unless the ``slam:`` settings say otherwise), then the ``slam:`` section of ``--config``,
 then ``--slam`` (the same content as JSON; the workflow passes its config's section this
-way), then the per-lens options ``--mask-radius``, ``--pixel-scale``, ``--mge-sets``,
-``--point-set``.
+way). What is set per lens (:class:`~mgelens.pipeline.settings.LensSpec`, the sample
+sheet's columns) comes from ``--mask-radius`` (default: the folder's ``truth.json``),
+``--mask-centre``, ``--pixel-scale``, ``--mge-sets`` (default 4) and ``--point-set``
+(default yes).
 """
 
 import argparse
@@ -27,7 +29,14 @@ from mgelens.imaging import ImagingError
 from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import records
 from mgelens.pipeline.run import run_phase
-from mgelens.pipeline.settings import PHASES, PROFILES, SettingsError, load_settings
+from mgelens.pipeline.settings import (
+    MGE_SET_CHOICES,
+    PHASES,
+    PROFILES,
+    LensSpec,
+    SettingsError,
+    load_settings,
+)
 from mgelens.search.results import RESULT_FILE
 
 logger = logging.getLogger("mgelens.pipeline")
@@ -72,15 +81,30 @@ def register(subparsers) -> None:
     parser.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     parser.add_argument("--mask-radius", type=float, help="mask radius in arcsec")
     parser.add_argument(
+        "--mask-centre",
+        type=float,
+        nargs=2,
+        default=(0.0, 0.0),
+        metavar=("X", "Y"),
+        help="mask centre in arcsec, also the centre of SP's priors (default 0 0)",
+    )
+    parser.add_argument(
         "--pixel-scale",
         type=float,
         help="arcsec per image pixel (default: the folder's info.json, else the data header)",
     )
     parser.add_argument(
-        "--mge-sets", type=int, choices=(2, 4, 6), help="MGE sets of the light phase"
+        "--mge-sets",
+        type=int,
+        choices=MGE_SET_CHOICES,
+        default=LensSpec.mge_sets,
+        help=f"MGE sets of the light phase (default {LensSpec.mge_sets})",
     )
     parser.add_argument(
-        "--point-set", choices=("yes", "no"), help="add the point set (light phase)"
+        "--point-set",
+        choices=("yes", "no"),
+        default="yes" if LensSpec.point_set else "no",
+        help="add the point set (light phase)",
     )
     parser.set_defaults(func=run)
 
@@ -89,16 +113,24 @@ def run(args: argparse.Namespace) -> int:
     try:
         threads.limit_threads(args.threads)
         keep_freed_memory()
-        settings = load_settings(args.config, args.profile, args.slam).with_overrides(
+        settings = load_settings(args.config, args.profile, args.slam)
+        lens = LensSpec(
             mask_radius=args.mask_radius,
+            mask_centre=tuple(args.mask_centre),
             pixel_scale=args.pixel_scale,
             mge_sets=args.mge_sets,
-            point_set=None if args.point_set is None else args.point_set == "yes",
+            point_set=args.point_set == "yes",
         )
         folder = args.folder or args.phase
         make_output_folders(args.results / folder / RESULT_FILE)
         run_phase(
-            args.phase, args.lens_dir, args.results, settings, seed=args.seed, folder_name=folder
+            args.phase,
+            args.lens_dir,
+            args.results,
+            settings,
+            lens,
+            seed=args.seed,
+            folder_name=folder,
         )
     except (SettingsError, ImagingError, records.PhaseInputError, ValueError, OSError) as error:
         logger.error("phase %s: %s", args.phase, error)

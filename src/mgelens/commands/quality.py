@@ -6,7 +6,7 @@ Example::
         --out results/M1/quality.json
 
 Reads the phase's ``model.fits`` (NRESID, LENSED), its fit mask (``mask_radius`` and
-``slam.mask_centre`` of ``result.json``, combined with the lens folder's ``mask.fits`` if
+``lens.mask_centre`` of ``result.json``, combined with the lens folder's ``mask.fits`` if
 any) and the lens's noise map, and writes the statistic of :mod:`mgelens.quality` as JSON::
 
     {"lens": ..., "phase": ..., "mgelens_version": ..., "measured": true, "flag": false,
@@ -24,7 +24,6 @@ Exit code 1 with a one-line error for missing or inconsistent inputs.
 
 import argparse
 import functools
-import json
 import logging
 from pathlib import Path
 
@@ -35,9 +34,15 @@ from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.atomic import write_json
 from mgelens.imaging import Imaging, ImagingError
 from mgelens.mask import circular
-from mgelens.pipeline.records import MODEL_FILE, light_components, mass_model, read_fit_record
+from mgelens.pipeline.records import (
+    MODEL_FILE,
+    light_components,
+    mass_model,
+    read_fit_record,
+    recorded_settings,
+)
 from mgelens.quality import lensing_check, quality_statistic
-from mgelens.search.results import RESULT_FILE
+from mgelens.search.results import PhaseResult
 
 logger = logging.getLogger(__name__)
 
@@ -84,13 +89,13 @@ def read_residual_images(path: Path) -> tuple[np.ndarray, np.ndarray]:
 def run(args: argparse.Namespace) -> int:
     lens = args.lens or args.phase.resolve().parent.name
     try:
-        settings = json.loads((args.phase / RESULT_FILE).read_text())["settings"]
+        phase = PhaseResult.read(args.phase)
+        settings = phase.settings
+        _, spec = recorded_settings(phase)
         lens_dir = args.lens_dir or Path(settings["lens_dir"])
-        circle = functools.partial(
-            _circle, float(settings["mask_radius"]), tuple(settings["slam"]["mask_centre"])
-        )
-        pixel_scale = settings["slam"].get("pixel_scale")  # the sheet's, if the fit had one
-        imaging = Imaging.from_folder(lens_dir, pixel_scale=pixel_scale, mask_from=circle)
+        circle = functools.partial(_circle, float(settings["mask_radius"]), spec.mask_centre)
+        # the sheet's pixel scale, if the fit had one
+        imaging = Imaging.from_folder(lens_dir, pixel_scale=spec.pixel_scale, mask_from=circle)
         nresid, lensed = read_residual_images(args.phase / MODEL_FILE)
         statistic = quality_statistic(
             nresid, lensed, imaging.noise_map, imaging.mask, imaging.pixel_scale
@@ -100,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         lensing = lensing_check(
             mass_model(args.phase),
             float(settings["mask_radius"]),
-            tuple(settings["slam"]["mask_centre"]),
+            spec.mask_centre,
             light_centre=tuple(light["centre"]),
         )
     except (OSError, KeyError, ValueError, ImagingError) as exc:

@@ -19,7 +19,6 @@ import numpy as np
 
 from mgelens import mask as mask_module
 from mgelens.fit import FitDataset
-from mgelens.fit_settings import FitSettings
 from mgelens.imaging import DATA_FILE, INFO_FILE, MASK_FILE, Imaging
 from mgelens.pipeline import fittable, models, products
 from mgelens.pipeline.records import (
@@ -29,7 +28,7 @@ from mgelens.pipeline.records import (
     profiles_from_record,
     read_fit_record,
 )
-from mgelens.pipeline.settings import SlamSettings
+from mgelens.pipeline.settings import LensSpec, SlamSettings
 from mgelens.search.model import ParameterSpace
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult
 
@@ -141,25 +140,26 @@ def earlier_phases(
     return tuple(read_phase(results_dir, name, settings.allow_unconverged) for name in names)
 
 
-def resolve_mask_radius(lens_dir: Path, settings: SlamSettings) -> float:
-    """Mask radius (arcsec): the settings' value, else ``mask_radius`` of ``truth.json``."""
-    if settings.mask_radius is not None:
-        return float(settings.mask_radius)
+def resolve_mask_radius(lens_dir: Path, lens: LensSpec) -> float:
+    """Mask radius (arcsec): the lens spec's, else ``mask_radius`` of ``truth.json``."""
+    if lens.mask_radius is not None:
+        return float(lens.mask_radius)
     truth = lens_dir / "truth.json"
     if truth.is_file():
         radius = json.loads(truth.read_text()).get("mask_radius")
         if radius is not None:
             return float(radius)
     raise PhaseInputError(
-        f"no mask radius for {lens_dir}: pass --mask-radius, set slam.mask_radius in the "
-        "config, or give the folder a truth.json with mask_radius"
+        f"no mask radius for {lens_dir}: pass --mask-radius (the sample sheet's mask_radius "
+        "column), or give the folder a truth.json with mask_radius"
     )
 
 
 def load_dataset(
-    lens_dir: Path, settings: SlamSettings, light_centre: tuple[float, float]
+    lens_dir: Path, settings: SlamSettings, lens: LensSpec, light_centre: tuple[float, float]
 ) -> tuple[FitDataset, float]:
-    """Imaging of ``lens_dir`` in the circular mask of the settings, and the mask radius.
+    """Imaging of ``lens_dir`` in the lens's circular mask, under the settings' fit
+    settings, and the mask radius.
 
     A ``mask.fits`` in the folder is combined with the circle (a pixel is used only if
     both use it); only the pixels used must hold finite data and a positive noise.
@@ -172,24 +172,13 @@ def load_dataset(
         light inside it (:mod:`mgelens.pipeline.fittable`), and for unreadable or invalid
         files (:class:`~mgelens.imaging.Imaging`).
     """
-    radius = resolve_mask_radius(lens_dir, settings)
+    radius = resolve_mask_radius(lens_dir, lens)
     data_file = lens_dir / DATA_FILE
-    circle = functools.partial(_fit_circle, data_file, radius, settings.mask_centre)
-    imaging = Imaging.from_folder(lens_dir, pixel_scale=settings.pixel_scale, mask_from=circle)
+    circle = functools.partial(_fit_circle, data_file, radius, lens.mask_centre)
+    imaging = Imaging.from_folder(lens_dir, pixel_scale=lens.pixel_scale, mask_from=circle)
     mask = imaging.mask
     fittable.check_signal(data_file, imaging, mask, radius)
-    fit_settings = FitSettings(
-        positive_only=settings.positive_only,
-        sub_size=settings.sub_size,
-        lp_sub_size=settings.lp_sub_size,
-        lp_sub_size_centre=settings.lp_sub_size_centre,
-        lp_centre_radius=settings.lp_centre_radius,
-        use_border=settings.use_border,
-        force_edge_pixels_to_zero=settings.force_edge_pixels_to_zero,
-        edge_rule=settings.edge_rule,
-        psf_trim=settings.psf_trim,
-    )
-    return FitDataset.from_imaging(imaging, mask, fit_settings, light_centre), radius
+    return FitDataset.from_imaging(imaging, mask, settings.fit, light_centre), radius
 
 
 def _fit_circle(

@@ -15,17 +15,20 @@ and the block ``max_likelihood_fit``:
 * figures of merit: ln L, ln ε, χ², image pixels, the solve and its active bounds.
 """
 
+import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
 
 from mgelens.fit import FitResult
+from mgelens.fit_settings import FitSettings
 from mgelens.geometry import axis_ratio_and_angle_from
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import mass_from_dict
 from mgelens.pipeline import models
-from mgelens.search.results import RESULT_FILE
+from mgelens.pipeline.settings import LENS_KEYS, LensSpec, SlamSettings, settings_from_mapping
+from mgelens.search.results import RESULT_FILE, PhaseResult
 
 MODEL_FILE = "model.fits"
 """A phase folder's images of its maximum-likelihood model (:mod:`mgelens.pipeline.products`)."""
@@ -154,3 +157,23 @@ def lens_light_profiles(result_folder: str | Path) -> tuple:
 def mass_model(result_folder: str | Path) -> tuple:
     """The maximum-likelihood mass profiles (SIE or EPL, ExternalShear) of a phase folder."""
     return tuple(mass_from_dict(entry) for entry in read_fit_record(result_folder)["mass"])
+
+
+def recorded_settings(phase: PhaseResult) -> tuple[SlamSettings, LensSpec]:
+    """The chain's settings and the lens spec a phase ran with, from its ``result.json``.
+
+    Results written before the fit settings nested under ``slam.fit`` and the per-lens
+    values moved to ``lens`` (their ``slam`` record is flat, with ``mask_radius``,
+    ``mask_centre``, ``pixel_scale``, ``mge_sets`` and ``point_set``, and no ``lens``)
+    are read too: their keys are sorted into the same two records.
+    """
+    recorded = dict(phase.settings["slam"])
+    lens = phase.settings.get("lens")
+    if lens is None:
+        lens = {key: recorded.pop(key) for key in LENS_KEYS if key in recorded}
+        fit_keys = {f.name for f in dataclasses.fields(FitSettings)}
+        recorded["fit"] = {key: recorded.pop(key) for key in fit_keys if key in recorded}
+    lens = dict(lens)
+    lens["mask_centre"] = tuple(lens.get("mask_centre", (0.0, 0.0)))
+    settings = settings_from_mapping(recorded, recorded.pop("profile"), origin=RESULT_FILE)
+    return settings, LensSpec(**lens)

@@ -50,8 +50,8 @@ from mgelens.imaging import DATA_FILE
 from mgelens.pipeline import fittable, models, products, sp_start
 from mgelens.pipeline.phases import light, mass, sp, spix1, spix2
 from mgelens.pipeline.problem import PhaseProblem, phase_log
-from mgelens.pipeline.records import ADAPT_IMAGE_FILE, MODEL_FILE, fit_record
-from mgelens.pipeline.settings import PHASES, SlamSettings, settings_from_mapping
+from mgelens.pipeline.records import ADAPT_IMAGE_FILE, MODEL_FILE, fit_record, recorded_settings
+from mgelens.pipeline.settings import PHASES, LensSpec, SlamSettings
 from mgelens.provenance import command_version
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.evaluation import SPAWN, prepare_worker_process
@@ -262,6 +262,7 @@ def _solve(
     problems: list[PhaseProblem],
     folder: Path,
     settings: SlamSettings,
+    lens: LensSpec,
     seed: int,
     lens_dir: Path,
     checksums: dict,
@@ -288,7 +289,7 @@ def _solve(
         phase=best_problem.name,
         space=best_problem.space,
         output=output,
-        settings=_phase_settings(problems, outputs, best_run, settings, lens_dir),
+        settings=_phase_settings(problems, outputs, best_run, settings, lens, lens_dir),
         input_checksums=checksums,
     )
     values = best_problem.space.values(output.max_likelihood())
@@ -340,11 +341,12 @@ def _phase_settings(
     outputs: list[SamplerOutput],
     best_run: int,
     settings: SlamSettings,
+    lens: LensSpec,
     lens_dir: Path,
 ) -> dict:
-    """The ``settings`` record of ``result.json``: the chain's settings and the model and
-    fit of the run holding the highest-likelihood sample, and each mesh's run when MASS
-    pooled several."""
+    """The ``settings`` record of ``result.json``: the chain's settings, the lens spec, the
+    mask radius used and the model of the run holding the highest-likelihood sample, and
+    each mesh's run when MASS pooled several."""
     best_problem = problems[best_run]
     phase_settings = {
         "profile": settings.profile,
@@ -352,7 +354,7 @@ def _phase_settings(
         "mask_radius": best_problem.mask_radius,
         "model": best_problem.model.describe(),
         "slam": settings.to_dict(),
-        "fit": dataclasses.asdict(best_problem.dataset.settings),
+        "lens": lens.to_dict(),
         "positions": None if best_problem.positions is None else best_problem.positions.describe(),
     }
     if len(problems) > 1:
@@ -432,7 +434,7 @@ def image_positions(result: FitResult, settings: SlamSettings) -> models.Positio
 
 
 def build_problem(
-    name: str, lens_dir: Path, results_dir: Path, settings: SlamSettings
+    name: str, lens_dir: Path, results_dir: Path, settings: SlamSettings, lens: LensSpec
 ) -> PhaseProblem:
     """The problem of phase ``name`` (:mod:`mgelens.pipeline.phases`).
 
@@ -442,15 +444,15 @@ def build_problem(
         For an unknown phase name.
     """
     if name == "sp":
-        return sp.problem(lens_dir, results_dir, settings)
+        return sp.problem(lens_dir, results_dir, settings, lens)
     if name == "spix1":
-        return spix1.problem(lens_dir, results_dir, settings)
+        return spix1.problem(lens_dir, results_dir, settings, lens)
     if name == "spix2":
-        return spix2.problem(lens_dir, results_dir, settings)
+        return spix2.problem(lens_dir, results_dir, settings, lens)
     if name == "light":
-        return light.problem(lens_dir, results_dir, settings)
+        return light.problem(lens_dir, results_dir, settings, lens)
     if name == "mass":
-        return mass.problem(lens_dir, results_dir, settings)
+        return mass.problem(lens_dir, results_dir, settings, lens)
     raise ValueError(f"unknown phase {name!r}; phases are {list(PHASES)}")
 
 
@@ -459,6 +461,7 @@ def run_phase(
     lens_dir: str | Path,
     results_dir: str | Path,
     settings: SlamSettings,
+    lens: LensSpec | None = None,
     seed: int = 0,
     threads: int | None = None,
     folder_name: str | None = None,
@@ -474,6 +477,9 @@ def run_phase(
     results_dir : path
         The lens's results folder holding one sub-folder per phase.
     settings : SlamSettings
+    lens : LensSpec, optional
+        What is set per lens (mask, pixel scale, MGE sets); ``LensSpec()`` if not given,
+        which takes the mask radius from the folder's ``truth.json`` (mocks).
     seed : int
         Seed of the sampler.
     threads : int, optional
@@ -496,11 +502,12 @@ def run_phase(
     if threads is not None:
         limit_threads(threads)
     lens_dir, results_dir = Path(lens_dir), Path(results_dir)
+    lens = LensSpec() if lens is None else lens
     folder = results_dir / (folder_name or name)
     folder.mkdir(parents=True, exist_ok=True)
     with phase_log(folder):
         runs = chain_settings(name, settings)
-        problems = [build_problem(name, lens_dir, results_dir, s) for s in runs]
+        problems = [build_problem(name, lens_dir, results_dir, s, lens) for s in runs]
         first = problems[0]
         fittable.check_pixels_per_parameter(
             lens_dir / DATA_FILE,
@@ -512,7 +519,7 @@ def run_phase(
         checksums = input_checksums(first.inputs)
         if name == "sp" and settings.sp_start == "search":
             problems = [started_sp(first, folder, checksums)]
-        return _solve(problems, folder, settings, seed, lens_dir, checksums)
+        return _solve(problems, folder, settings, lens, seed, lens_dir, checksums)
 
 
 def started_sp(problem: PhaseProblem, folder: Path, checksums: dict) -> PhaseProblem:
@@ -563,11 +570,10 @@ def max_likelihood_problem(
     (in a pooled MASS phase, with the k-means seed of the mesh whose run holds the
     highest-likelihood sample) and the earlier phases' files in ``results_dir``.
     """
-    recorded = dict(phase.settings["slam"])
-    settings = settings_from_mapping(recorded, recorded.pop("profile"), origin=RESULT_FILE)
+    settings, lens = recorded_settings(phase)
     best = [mesh for mesh in phase.settings.get("meshes", []) if mesh["holds_max_likelihood"]]
     if best:
         settings = dataclasses.replace(settings, kmeans_seed=int(best[0]["kmeans_seed"]))
-    problem = build_problem(phase.phase, Path(lens_dir), Path(results_dir), settings)
+    problem = build_problem(phase.phase, Path(lens_dir), Path(results_dir), settings, lens)
     values = problem.space.values(problem.space.vector(phase.max_likelihood))
     return problem, values

@@ -16,16 +16,22 @@ Two profiles give the defaults (:data:`PROFILES`):
   itself is not simplified (30 Gaussians per set, SPEC §2.4).
 
 A YAML file may override any field under a top-level ``slam:`` key; other top-level keys
-(the workflow's own configuration) are ignored. Per-phase sampler settings go under
-``slam: samplers: <phase>:`` and are merged into the profile's. Unknown keys and values of
-the wrong type or range raise :class:`SettingsError` naming the key by its dotted path
-(``slam.sub_size``, ``slam.samplers.mass.n_live``; :mod:`mgelens.values`). Example::
+(the workflow's own configuration) are ignored. The fit's numerical settings go under
+``slam: fit:`` and per-phase sampler settings under ``slam: samplers: <phase>:``; both are
+merged into the profile's. Unknown keys and values of the wrong type or range raise
+:class:`SettingsError` naming the key by its dotted path (``slam.fit.sub_size``,
+``slam.samplers.mass.n_live``; :mod:`mgelens.values`). Example::
 
     slam:
-      positive_only: false        # pn-MGE
-      mge_sets: 6                 # or lens_light_model: sersic (the 3×Sérsic comparison)
+      lens_light_model: sersic    # the 3×Sérsic comparison
+      fit: {positive_only: false} # unconstrained solve (also pn-MGE with the MGE)
       samplers:
         mass: {n_live: 80}
+
+What differs from lens to lens is a :class:`LensSpec` (mask radius and centre, pixel
+scale, the LIGHT phase's MGE sets and point set), which the workflow builds from the
+sample sheet and passes as ``mgelens phase`` options; a ``slam:`` section naming one of
+these is refused.
 """
 
 import dataclasses
@@ -37,9 +43,10 @@ from types import MappingProxyType
 import yaml
 
 from mgelens import values
+from mgelens.fit_settings import FitSettings
 from mgelens.search.sampler_settings import SamplerSettings
 from mgelens.source.interpolate import INTERPOLATIONS
-from mgelens.source.schemes import EDGE_RULES, SIGNAL_AVERAGES
+from mgelens.source.schemes import SIGNAL_AVERAGES
 
 PHASES = ("sp", "spix1", "spix2", "light", "mass")
 """Phase names in chain order; each is also the name of the phase's result folder."""
@@ -68,19 +75,6 @@ class SlamSettings:
     ----------
     profile : {"quick", "paper"}
         Speed profile the defaults came from (recorded in results).
-    mask_radius : float or None
-        Radius of the circular fit mask in arcsec; ``None`` takes ``mask_radius`` from the
-        lens folder's ``truth.json`` (mocks). The MGE σ grid runs from Δ/5 to this radius.
-    mask_centre : (float, float)
-        Mask centre (x, y) in arcsec; also the centre of the SP lens-light and mass priors.
-    pixel_scale : float or None
-        Arcsec per image pixel; ``None`` takes it from the imaging folder (``info.json``,
-        else the data header's ``PIXSCALE`` or celestial WCS). A value here wins over both,
-        with a warning if the header differs (:meth:`~mgelens.imaging.Imaging.from_folder`).
-        The workflow sets it per lens from the sample sheet's ``pixel_scale`` column.
-    positive_only : bool
-        Non-negative solve of all linear unknowns ("nn-MGE", default) or unconstrained
-        ("pn-MGE"), in every phase.
     lens_light_model : {"mge", "sersic"}
         The lens light: the MGE (paper's method) or the paper's 3×Sérsic comparison
         (SPEC §8.1): 2 Sérsics with a shared centre in SP, fixed entirely (intensities
@@ -88,11 +82,7 @@ class SlamSettings:
         All Sérsic intensities are solved linearly. The paper's Sérsic runs did not
         constrain the source positive, unlike its MGE runs, so a settings mapping (YAML
         ``slam:`` section or ``--slam``) that sets ``lens_light_model: sersic`` must set
-        ``positive_only`` too (:func:`settings_from_mapping` refuses it otherwise).
-    mge_sets : {2, 4, 6}
-        Extended 30-Gaussian sets of the LIGHT phase (SP always uses 2).
-    point_set : bool
-        Add the 10-Gaussian point set (own centre and ell_comps) in the LIGHT phase.
+        ``fit.positive_only`` too (:func:`settings_from_mapping` refuses it otherwise).
     source_pixels : int
         k-means source pixels of SPix2, LIGHT and MASS (paper 1500).
     overlay_shape : (int, int)
@@ -134,38 +124,32 @@ class SlamSettings:
         the few live points otherwise lose the physical mode to demagnified solutions).
     positions_factor, positions_minimum : float
         Threshold = max(factor × SP's own source-plane scatter, minimum arcsec) (3, 0.2″).
-    force_edge_pixels_to_zero : bool
-        Fix the convex-hull source pixels to zero in the non-negative solve (SPEC §6.3, the
-        anchor's default since 2023). Off, the hull pixels are solved like the others.
-    edge_rule : {"anchor", "continuous"}
-        How the source mesh treats its hull and the mask border (:class:`mgelens.fit_settings.FitSettings`):
-        the anchor's rules (SPEC §4.2–4.4), or continuous ones under which the evidence is
-        a continuous function of the mass parameters (with ``force_edge_pixels_to_zero``
-        off and, for adaptive regularization, ``adaptive_signals: weighted``).
-    sub_size, lp_sub_size, lp_sub_size_centre, lp_centre_radius, use_border, psf_trim
-        Fit settings (:class:`mgelens.fit_settings.FitSettings`). ``psf_trim`` cuts the PSF to the
-        kernel holding every entry ≥ that fraction of its peak: 1e−10 (paper) changes no
-        model image; quick's 1e−4 cuts the mock's 21×21 Gaussian PSF (σ = 1 pixel) to
-        9×9, losing 6e−6 of its flux, and leaves the SLACS 15×15 PSFs whole. Quick's 2×2
-        source sub-grid (paper 4×4) makes a pixelized evaluation about 20 % faster and
-        leaves the MASS posterior as it was (docs/design_notes.md, "Source sub-grid").
     allow_unconverged : bool
         Let a phase build on an earlier phase whose sampler did not converge (its
         ``result.json`` says ``converged: false``, e.g. capped by ``max_calls``). Off, such a
         phase stops with a message naming the file (:func:`mgelens.pipeline.problem.read_phase`);
         on, for smoke tests of the plumbing.
+    fit : FitSettings
+        The fit's numerical choices (:class:`mgelens.fit_settings.FitSettings`), YAML
+        ``slam: fit:``: ``positive_only`` (non-negative solve of all linear unknowns,
+        "nn-MGE", or unconstrained, "pn-MGE", in every phase), the sub-grids, border,
+        ``force_edge_pixels_to_zero`` and ``edge_rule`` (the anchor's rules, SPEC §4.2–4.4,
+        or continuous ones under which the evidence is a continuous function of the mass
+        parameters, with ``force_edge_pixels_to_zero`` off and ``adaptive_signals:
+        weighted``) and ``psf_trim``. Quick's ``psf_trim`` 1e−4 cuts the mock's 21×21
+        Gaussian PSF (σ = 1 pixel) to 9×9, losing 6e−6 of its flux, and leaves the SLACS
+        15×15 PSFs whole; its 2×2 source sub-grid (paper 4×4) makes a pixelized
+        evaluation about 20 % faster and leaves the MASS posterior as it was
+        (docs/design_notes.md, "Source sub-grid").
     samplers : mapping of phase name to SamplerSettings
         The non-linear search of each phase.
+
+    What differs from lens to lens (mask, pixel scale, MGE sets) is not here but in
+    :class:`LensSpec`.
     """
 
     profile: str = "quick"
-    mask_radius: float | None = None
-    mask_centre: tuple[float, float] = (0.0, 0.0)
-    pixel_scale: float | None = None
-    positive_only: bool = True
     lens_light_model: str = "mge"
-    mge_sets: int = 4
-    point_set: bool = True
     source_pixels: int = 1500
     overlay_shape: tuple[int, int] = (34, 34)
     spix1_regularization: str = "constant"
@@ -180,15 +164,8 @@ class SlamSettings:
     positions_penalty: bool = False
     positions_factor: float = 3.0
     positions_minimum: float = 0.2
-    force_edge_pixels_to_zero: bool = True
-    edge_rule: str = "anchor"
-    sub_size: int = 4
-    lp_sub_size: int = 4
-    lp_sub_size_centre: int = 16
-    lp_centre_radius: float = 0.3
-    use_border: bool = True
-    psf_trim: float = 1e-10
     allow_unconverged: bool = False
+    fit: FitSettings = field(default_factory=FitSettings)
     samplers: Mapping[str, SamplerSettings] = field(default_factory=dict)
 
     def __post_init__(self):
@@ -199,19 +176,17 @@ class SlamSettings:
         missing = [p for p in PHASES if p not in self.samplers]
         if missing:
             raise SettingsError(f"sampler settings missing for phases {missing}")
+        if not isinstance(self.fit, FitSettings):
+            raise SettingsError(f"slam.fit must be FitSettings, got {self.fit!r}")
         for name, value in checked.items():
             object.__setattr__(self, name, value)
         object.__setattr__(self, "samplers", MappingProxyType(dict(self.samplers)))
 
-    def with_overrides(self, **changes) -> "SlamSettings":
-        """A copy with the given fields replaced (``None`` values are ignored)."""
-        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
-
     def to_dict(self) -> dict:
         """JSON-ready form (recorded in every result file)."""
         content = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        content["mask_centre"] = list(self.mask_centre)
         content["overlay_shape"] = list(self.overlay_shape)
+        content["fit"] = self.fit.to_dict()
         content["samplers"] = {name: s.to_dict() for name, s in self.samplers.items()}
         return content
 
@@ -231,25 +206,12 @@ def _checked_fields(settings: SlamSettings) -> dict:
             checked[name] = values.number(key, value, **_NUMBERS[name])
         elif f.type is bool:
             checked[name] = values.boolean(key, value)
-    if settings.mask_radius is not None:
-        checked["mask_radius"] = values.number(
-            "slam.mask_radius", settings.mask_radius, 0.0, open_minimum=True
-        )
-    if settings.pixel_scale is not None:
-        checked["pixel_scale"] = values.number(
-            "slam.pixel_scale", settings.pixel_scale, 0.0, open_minimum=True
-        )
-    checked["mask_centre"] = values.pair(
-        "slam.mask_centre", settings.mask_centre, values.number, "two numbers (x, y) in arcsec"
-    )
     checked["overlay_shape"] = values.pair(
         "slam.overlay_shape",
         settings.overlay_shape,
         lambda name, n: values.integer(name, n, 2),
         "two integers >= 2 (n_y, n_x)",
     )
-    mge_sets = values.integer("slam.mge_sets", settings.mge_sets, 1)
-    checked["mge_sets"] = values.choice("slam.mge_sets", mge_sets, MGE_SET_CHOICES)
     kmeans_scheme = settings.kmeans_scheme
     if isinstance(kmeans_scheme, int) and not isinstance(kmeans_scheme, bool):
         kmeans_scheme = str(kmeans_scheme)  # YAML reads `kmeans_scheme: 2024` as a number
@@ -264,7 +226,6 @@ _CHOICES = {
     "interpolation": INTERPOLATIONS,
     "cross_offset": CROSS_OFFSETS,
     "adaptive_signals": SIGNAL_AVERAGES,
-    "edge_rule": EDGE_RULES,
     "prior_passing": PRIOR_PASSING_RULES,
     "sp_start": SP_STARTS,
 }
@@ -273,18 +234,82 @@ _INTEGERS = {
     "source_pixels": 3,
     "kmeans_seed": 0,
     "mass_meshes": 1,
-    "sub_size": 1,
-    "lp_sub_size": 1,
-    "lp_sub_size_centre": 1,
 }
 """Integer fields and their minimum."""
 _NUMBERS = {
     "positions_factor": {"minimum": 0.0, "open_minimum": True},
     "positions_minimum": {"minimum": 0.0},
-    "lp_centre_radius": {"minimum": 0.0},
-    "psf_trim": {"minimum": 0.0, "maximum": 1.0, "open_maximum": True},
 }
 """Real-valued fields and their range (:func:`mgelens.values.number`)."""
+
+
+LENS_KEYS = {
+    "mask_radius": "--mask-radius, or the sample sheet's mask_radius column",
+    "mask_centre": "--mask-centre",
+    "pixel_scale": "--pixel-scale, or the sample sheet's pixel_scale column",
+    "mge_sets": "--mge-sets, or the sample sheet's mge_sets column",
+    "point_set": "--point-set, or the sample sheet's point_set column",
+}
+"""What a :class:`LensSpec` holds, and where each value is given."""
+
+
+@dataclass(frozen=True)
+class LensSpec:
+    """What the chain fits differently from lens to lens (the sample sheet's columns).
+
+    Attributes
+    ----------
+    mask_radius : float or None
+        Radius of the circular fit mask in arcsec; ``None`` takes ``mask_radius`` from the
+        lens folder's ``truth.json`` (mocks). The MGE σ grid runs from Δ/5 to this radius.
+    mask_centre : (float, float)
+        Mask centre (x, y) in arcsec; also the centre of the SP lens-light and mass priors.
+    pixel_scale : float or None
+        Arcsec per image pixel; ``None`` takes it from the imaging folder (``info.json``,
+        else the data header's ``PIXSCALE`` or celestial WCS). A value here wins over both,
+        with a warning if the header differs (:meth:`~mgelens.imaging.Imaging.from_folder`).
+    mge_sets : {2, 4, 6}
+        Extended 30-Gaussian sets of the LIGHT phase (SP always uses 2).
+    point_set : bool
+        Add the 10-Gaussian point set (own centre and ell_comps) in the LIGHT phase.
+
+    Only LIGHT reads ``mge_sets`` and ``point_set`` (MASS takes LIGHT's lens light from its
+    record), so the workflow passes them to LIGHT alone and the other phases record the
+    defaults.
+    """
+
+    mask_radius: float | None = None
+    mask_centre: tuple[float, float] = (0.0, 0.0)
+    pixel_scale: float | None = None
+    mge_sets: int = 4
+    point_set: bool = True
+
+    def __post_init__(self):
+        """Check every field; a :class:`SettingsError` names the field and where it is set."""
+        try:
+            checked = {
+                "mask_centre": values.pair(
+                    "mask_centre", self.mask_centre, values.number, "two numbers (x, y) in arcsec"
+                ),
+                "mge_sets": values.choice(
+                    "mge_sets", values.integer("mge_sets", self.mge_sets, 1), MGE_SET_CHOICES
+                ),
+                "point_set": values.boolean("point_set", self.point_set),
+            }
+            for name in ("mask_radius", "pixel_scale"):
+                if getattr(self, name) is not None:
+                    checked[name] = values.number(name, getattr(self, name), 0.0, open_minimum=True)
+        except ValueError as error:
+            name = str(error).split()[0]
+            raise SettingsError(f"{error} ({LENS_KEYS[name]})") from None
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
+
+    def to_dict(self) -> dict:
+        """JSON-ready form (recorded in every result file)."""
+        content = dataclasses.asdict(self)
+        content["mask_centre"] = list(self.mask_centre)
+        return content
 
 
 _PAPER_SAMPLERS = {
@@ -322,16 +347,18 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
         "quick": SlamSettings(
             profile="quick",
             positions_penalty=True,
-            edge_rule="continuous",
-            force_edge_pixels_to_zero=False,
             adaptive_signals="weighted",
             mass_meshes=2,
             source_pixels=500,
             overlay_shape=(24, 24),
-            sub_size=2,
-            lp_sub_size=2,
-            lp_sub_size_centre=8,
-            psf_trim=1e-4,
+            fit=FitSettings(
+                sub_size=2,
+                lp_sub_size=2,
+                lp_sub_size_centre=8,
+                psf_trim=1e-4,
+                force_edge_pixels_to_zero=False,
+                edge_rule="continuous",
+            ),
             samplers=_QUICK_SAMPLERS,
         ),
     }
@@ -370,11 +397,23 @@ def settings_from_mapping(
         For an unknown key (named with its ``slam.`` path) or an invalid value.
     """
     content = dict(content)
-    if content.get("lens_light_model") == "sersic" and "positive_only" not in content:
+    lens_keys = sorted(set(content) & set(LENS_KEYS))
+    if lens_keys:
         raise SettingsError(
-            f"{origin}: slam.lens_light_model: sersic needs slam.positive_only set too: false "
-            "for the paper's unconstrained 3×Sérsic solve (SPEC §8.1), true for non-negative "
-            "intensities; the default (true) is the MGE's"
+            f"{origin}: slam.{lens_keys[0]} is set per lens, not in slam: settings: give it "
+            f"with {LENS_KEYS[lens_keys[0]]}"
+        )
+    fit_section = content.pop("fit", None) or {}
+    if not isinstance(fit_section, Mapping):
+        raise SettingsError(
+            f"{origin}: slam.fit must be a mapping of fit settings (e.g. {{sub_size: 2}}), "
+            f"got {fit_section!r}"
+        )
+    if content.get("lens_light_model") == "sersic" and "positive_only" not in fit_section:
+        raise SettingsError(
+            f"{origin}: slam.lens_light_model: sersic needs slam.fit.positive_only set too: "
+            "false for the paper's unconstrained 3×Sérsic solve (SPEC §8.1), true for "
+            "non-negative intensities; the default (true) is the MGE's"
         )
     profile = profile or content.pop("profile", None) or DEFAULT_PROFILE
     content.pop("profile", None)
@@ -385,8 +424,14 @@ def settings_from_mapping(
     base = profile_settings(profile)
     known = {f.name for f in dataclasses.fields(SlamSettings)} - {"profile"}
     unknown = sorted(set(content) - known)
+    moved = [key for key in unknown if key in {f.name for f in dataclasses.fields(FitSettings)}]
+    if moved:
+        raise SettingsError(
+            f"{origin}: slam.{moved[0]} is a fit setting: give it as slam.fit.{moved[0]}"
+        )
     if unknown:
         raise SettingsError(f"{origin}: unknown key slam.{unknown[0]}; known keys: {sorted(known)}")
+    fit_settings = _merged_fit(base.fit, fit_section, origin)
     samplers = dict(base.samplers)
     section = content.pop("samplers", None) or {}
     if not isinstance(section, Mapping):
@@ -410,9 +455,23 @@ def settings_from_mapping(
         except (TypeError, ValueError) as error:  # the message starts with the key
             raise SettingsError(f"{origin}: slam.samplers.{phase}.{error}") from error
     try:
-        return dataclasses.replace(base, samplers=samplers, **content)
+        return dataclasses.replace(base, fit=fit_settings, samplers=samplers, **content)
     except (TypeError, ValueError) as error:
         raise SettingsError(f"{origin}: {error}") from error
+
+
+def _merged_fit(base: FitSettings, overrides: Mapping, origin: str) -> FitSettings:
+    """``base`` with the fields of a ``slam: fit:`` mapping replaced."""
+    known = {f.name for f in dataclasses.fields(FitSettings)}
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        raise SettingsError(
+            f"{origin}: unknown key slam.fit.{unknown[0]}; known keys: {sorted(known)}"
+        )
+    try:
+        return dataclasses.replace(base, **overrides)
+    except ValueError as error:  # the message starts with the key
+        raise SettingsError(f"{origin}: slam.fit.{error}") from error
 
 
 def load_settings(
@@ -446,7 +505,10 @@ def load_settings(
         samplers = dict(section.get("samplers") or {})
         for phase, values in (overrides.get("samplers") or {}).items():
             samplers[phase] = {**(samplers.get(phase) or {}), **(values or {})}
+        fit = {**(section.get("fit") or {}), **(overrides.get("fit") or {})}
         section = {**section, **overrides}
         if samplers:
             section["samplers"] = samplers
+        if fit:
+            section["fit"] = fit
     return settings_from_mapping(section, profile, origin=origin)

@@ -1,5 +1,5 @@
 """The five SLaM phases (SPEC §8.1), one module each: its parameter space (``space``) and
-the problem it samples (``problem(lens_dir, results_dir, settings)``), read top to bottom.
+the problem it samples (``problem(lens_dir, results_dir, settings, lens)``), read top to bottom.
 
 * :mod:`~mgelens.pipeline.phases.sp`: lens light, SIE + shear and an MGE source;
 * :mod:`~mgelens.pipeline.phases.spix1`: SIE + shear with a pixelized source;

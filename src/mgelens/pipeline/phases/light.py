@@ -12,7 +12,7 @@ from mgelens.pipeline.problem import (
     kmeans_source,
     load_dataset,
 )
-from mgelens.pipeline.settings import SlamSettings
+from mgelens.pipeline.settings import LensSpec, SlamSettings
 from mgelens.search.model import ParameterSpace
 from mgelens.search.priors import Uniform
 from mgelens.search.results import PhaseResult
@@ -40,20 +40,20 @@ def space(
     )
 
 
-def problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+def problem(
+    lens_dir: Path, results_dir: Path, settings: SlamSettings, lens: LensSpec
+) -> PhaseProblem:
     """LIGHT: MGE refit (N×30 + point set) or 3 Sérsics, mass (SPix1) and source (SPix2)
     fixed."""
     sp, spix1, spix2 = earlier_phases(results_dir, settings, "sp", "spix1", "spix2")
     sp.check_lens_light(settings)
-    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
+    dataset, radius = load_dataset(lens_dir, settings, lens, models.light_centre(sp.result))
     kmeans, adapt_path = kmeans_source(dataset, results_dir, settings)
     source = kmeans.fixed(spix2.result.max_likelihood)
     specs = (
         models.sersic_specs(3)
         if settings.lens_light_model == "sersic"
-        else models.mge_specs(
-            settings.mge_sets, settings.point_set, dataset.imaging.pixel_scale, radius
-        )
+        else models.mge_specs(lens.mge_sets, lens.point_set, dataset.imaging.pixel_scale, radius)
     )
     return PhaseProblem(
         "light",

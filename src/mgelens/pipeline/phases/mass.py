@@ -14,7 +14,7 @@ from mgelens.pipeline.problem import (
     load_dataset,
     positions_penalty,
 )
-from mgelens.pipeline.settings import SlamSettings
+from mgelens.pipeline.settings import LensSpec, SlamSettings
 from mgelens.search.model import Parameter, ParameterSpace
 from mgelens.search.results import PhaseResult
 
@@ -61,12 +61,14 @@ def space(
     )
 
 
-def problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+def problem(
+    lens_dir: Path, results_dir: Path, settings: SlamSettings, lens: LensSpec
+) -> PhaseProblem:
     """MASS: lens light (LIGHT) and source (SPix2) fixed, EPL + shear (8); the 3×Sérsic
     chain fits LIGHT's Sérsics together with the mass (22)."""
     sp, spix1, spix2, light = earlier_phases(results_dir, settings, "sp", "spix1", "spix2", "light")
     light.check_lens_light(settings)
-    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(light.result))
+    dataset, radius = load_dataset(lens_dir, settings, lens, models.light_centre(light.result))
     kmeans, adapt_path = kmeans_source(dataset, results_dir, settings)
     source = kmeans.fixed(spix2.result.max_likelihood)
     earlier = (*sp.files, *spix1.files, *spix2.files, *light.files, adapt_path)

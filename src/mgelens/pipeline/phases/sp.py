@@ -11,7 +11,7 @@ from mgelens.pipeline.problem import (
     imaging_files,
     load_dataset,
 )
-from mgelens.pipeline.settings import SlamSettings
+from mgelens.pipeline.settings import LensSpec, SlamSettings
 from mgelens.search.model import ParameterSpace
 from mgelens.search.priors import Gaussian
 
@@ -30,10 +30,12 @@ def space(
     return ParameterSpace((*light, *models.free_parameters(models.sp_mass_priors(centre)), *source))
 
 
-def problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+def problem(
+    lens_dir: Path, results_dir: Path, settings: SlamSettings, lens: LensSpec
+) -> PhaseProblem:
     """SP: 2×30 MGE lens light (or 2 Sérsics), SIE + shear, 1×20 MGE source (17 or 21)."""
     del results_dir  # the first phase reads no earlier result
-    dataset, radius = load_dataset(lens_dir, settings, settings.mask_centre)
+    dataset, radius = load_dataset(lens_dir, settings, lens, lens.mask_centre)
     specs = (
         models.sersic_specs(2)
         if settings.lens_light_model == "sersic"
@@ -42,7 +44,7 @@ def problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseP
     return PhaseProblem(
         "sp",
         dataset,
-        space(specs, settings.mask_centre),
+        space(specs, lens.mask_centre),
         models.PhaseModel(specs, models.MGESourceModel()),
         tuple(imaging_files(lens_dir)),
         radius,

@@ -14,7 +14,7 @@ from mgelens.pipeline.problem import (
     positions_penalty,
     sp_light_model,
 )
-from mgelens.pipeline.settings import SlamSettings
+from mgelens.pipeline.settings import LensSpec, SlamSettings
 from mgelens.search.model import ParameterSpace
 from mgelens.search.results import PhaseResult
 from mgelens.source.image_mesh import overlay_centres
@@ -34,11 +34,13 @@ def space(sp: PhaseResult, rule: str = "paper") -> ParameterSpace:
     )
 
 
-def problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+def problem(
+    lens_dir: Path, results_dir: Path, settings: SlamSettings, lens: LensSpec
+) -> PhaseProblem:
     """SPix1: lens light fixed (SP), SIE + shear passed from SP, overlay mesh (8)."""
     (sp,) = earlier_phases(results_dir, settings, "sp")
     sp.check_lens_light(settings)
-    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
+    dataset, radius = load_dataset(lens_dir, settings, lens, models.light_centre(sp.result))
     x, y = overlay_centres(dataset.mask, dataset.imaging.pixel_scale, settings.overlay_shape)
     source = models.MeshSourceModel(
         x, y, settings.spix1_regularization, settings.interpolation, settings.cross_offset

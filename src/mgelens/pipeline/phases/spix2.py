@@ -13,7 +13,7 @@ from mgelens.pipeline.problem import (
     load_dataset,
     sp_light_model,
 )
-from mgelens.pipeline.settings import SlamSettings
+from mgelens.pipeline.settings import LensSpec, SlamSettings
 from mgelens.search.model import ParameterSpace
 from mgelens.search.priors import Uniform
 from mgelens.search.results import PhaseResult
@@ -39,12 +39,14 @@ def space(sp: PhaseResult, spix1: PhaseResult) -> ParameterSpace:
     )
 
 
-def problem(lens_dir: Path, results_dir: Path, settings: SlamSettings) -> PhaseProblem:
+def problem(
+    lens_dir: Path, results_dir: Path, settings: SlamSettings, lens: LensSpec
+) -> PhaseProblem:
     """SPix2: lens light (SP) and mass (SPix1) fixed, k-means mesh + AdaptiveBrightnessSplit
     hyper-parameters free (5)."""
     sp, spix1 = earlier_phases(results_dir, settings, "sp", "spix1")
     sp.check_lens_light(settings)
-    dataset, radius = load_dataset(lens_dir, settings, models.light_centre(sp.result))
+    dataset, radius = load_dataset(lens_dir, settings, lens, models.light_centre(sp.result))
     source, adapt_path = kmeans_source(dataset, results_dir, settings)
     return PhaseProblem(
         "spix2",
