@@ -17,7 +17,8 @@ from bench_likelihood import inversion_system
 from common import median_time, peak_memory_mb, peak_traced_mb, report, set_threads
 
 from mgelens.inversion.evidence import log_det_cholesky, log_det_regularization
-from mgelens.inversion.solve import reconstruction_positive_negative, reconstruction_positive_only
+from mgelens.inversion.nnls import reconstruction_positive_only
+from mgelens.inversion.solve import reconstruction_positive_negative
 
 
 def main() -> None:

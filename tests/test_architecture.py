@@ -9,7 +9,7 @@ SOURCE = Path(__file__).resolve().parents[1] / "src" / "mgelens"
 LAYERS = (
     ("foundation", ("mgelens", "_jit", "atomic", "threads", "memory", "values", "rejection",
                     "provenance", "sheet", "geometry", "grid")),
-    ("data", ("imaging", "mask", "convolve")),
+    ("data", ("imaging", "imaging_input", "mask", "convolve")),
     ("profiles", ("light", "mass")),
     ("source", ("source",)),
     ("inversion", ("inversion",)),

@@ -5,6 +5,7 @@ import pytest
 import scipy.sparse
 import scipy.stats
 
+from mgelens.inversion.cholesky import InversionError
 from mgelens.inversion.evidence import (
     log_det_cholesky,
     log_det_regularization,
@@ -12,7 +13,6 @@ from mgelens.inversion.evidence import (
     log_likelihood,
     noise_normalization,
 )
-from mgelens.inversion.solve import InversionError
 
 
 def random_spd(seed, n, condition):

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from astropy.io import fits
 
-from mgelens.imaging import Imaging, ImagingError, read_psf
+from mgelens.imaging import Imaging
+from mgelens.imaging_input import ImagingError, read_psf
 from mgelens.mask import circular, contaminant_regions_from_noise
 
 SHAPE = (12, 15)

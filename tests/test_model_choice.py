@@ -10,7 +10,7 @@ from astropy.io import fits
 from test_pipeline import LENS, mock_dir  # noqa: F401  (fixture)
 
 from mgelens.cli import main
-from mgelens.imaging import ImagingError
+from mgelens.imaging_input import ImagingError
 from mgelens.pipeline import problem, run
 from mgelens.pipeline.model_choice import (
     Candidate,

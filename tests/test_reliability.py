@@ -7,7 +7,8 @@ from astropy.io import fits
 
 from mgelens.cli import main
 from mgelens.grid import pixel_centres
-from mgelens.imaging import Imaging, ImagingError
+from mgelens.imaging import Imaging
+from mgelens.imaging_input import ImagingError
 from mgelens.pipeline import problem
 from mgelens.pipeline.settings import LensSpec, settings_from_mapping
 from mgelens.sheet import SheetError, read_sample_sheet

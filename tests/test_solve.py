@@ -11,12 +11,11 @@ import scipy.optimize
 import scipy.sparse
 from scipy.spatial import KDTree
 
+from mgelens.inversion.cholesky import InversionError
+from mgelens.inversion.nnls import _step_to_boundary, reconstruction_positive_only
 from mgelens.inversion.solve import (
-    InversionError,
     _reduced_solve,
-    _step_to_boundary,
     reconstruction_positive_negative,
-    reconstruction_positive_only,
     solve_linear_system,
 )
 

@@ -22,13 +22,14 @@ from mgelens.convolve import trimmed_psf
 from mgelens.fit_settings import FitSettings
 from mgelens.grid import SubGrid, pixel_centres, sub_grid, to_native
 from mgelens.imaging import Imaging
+from mgelens.inversion.cholesky import InversionError
 from mgelens.inversion.evidence import (
     log_det_regularization,
     log_evidence,
     log_likelihood,
     noise_normalization,
 )
-from mgelens.inversion.solve import InversionError, LinearSolution, solve_linear_system
+from mgelens.inversion.solve import LinearSolution, solve_linear_system
 from mgelens.inversion.system import DenseTerms, TilePlan, curvature_matrix, data_vector
 from mgelens.light import LightGrid, MGESet
 from mgelens.mask import validate_mask

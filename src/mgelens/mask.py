@@ -18,7 +18,8 @@ from contextlib import contextmanager
 import numpy as np
 
 from mgelens.grid import pixel_centres
-from mgelens.imaging import Imaging, ImagingError, check_mask, check_positive, read_fits_mask
+from mgelens.imaging import Imaging
+from mgelens.imaging_input import ImagingError, check_mask, check_positive, read_fits_mask
 
 RADIUS_TOLERANCE = 1e-9
 """Arcsec added to radii so that pixel centres exactly on a circle are inside."""

@@ -32,7 +32,7 @@ from astropy.io import fits
 from mgelens.atomic import atomic_path, write_fits, write_json
 from mgelens.commands import add_threads_argument, make_output_folders
 from mgelens.convolve import convolve_image
-from mgelens.imaging import (
+from mgelens.imaging_input import (
     PIXSCALE_KEY,
     ImagingError,
     check_positive,

@@ -30,7 +30,7 @@ from astropy.io import fits
 
 from mgelens.atomic import atomic_path
 from mgelens.commands import make_output_folders
-from mgelens.imaging import ImagingError, read_fits_image
+from mgelens.imaging_input import ImagingError, read_fits_image
 from mgelens.mask import circular
 from mgelens.mock_study import (
     MODELS,

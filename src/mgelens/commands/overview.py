@@ -18,7 +18,7 @@ from pathlib import Path
 
 from mgelens.commands import add_threads_argument, make_output_folders
 from mgelens.fit import FitError, fit
-from mgelens.imaging import ImagingError
+from mgelens.imaging_input import ImagingError
 from mgelens.overview import overview_from_fit
 from mgelens.pipeline.models import UnphysicalSample
 from mgelens.pipeline.records import PhaseInputError, recorded_settings

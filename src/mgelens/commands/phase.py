@@ -25,7 +25,7 @@ from pathlib import Path
 
 from mgelens import threads
 from mgelens.commands import make_output_folders
-from mgelens.imaging import ImagingError
+from mgelens.imaging_input import ImagingError
 from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import records
 from mgelens.pipeline.run import run_phase

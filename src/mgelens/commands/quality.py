@@ -32,7 +32,8 @@ from astropy.io import fits
 
 from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.atomic import write_json
-from mgelens.imaging import Imaging, ImagingError
+from mgelens.imaging import Imaging
+from mgelens.imaging_input import ImagingError
 from mgelens.mask import circular
 from mgelens.pipeline.records import (
     MODEL_FILE,

@@ -38,7 +38,7 @@ from astropy.io import fits
 
 from mgelens.atomic import atomic_path, write_json
 from mgelens.commands import add_threads_argument
-from mgelens.imaging import ImagingError, read_fits_image
+from mgelens.imaging_input import ImagingError, read_fits_image
 from mgelens.isophote_recovery import (
     PROFILE_COLUMNS,
     IsophoteRecovery,

@@ -24,7 +24,8 @@ from pathlib import Path
 
 from mgelens.atomic import atomic_path
 from mgelens.commands import add_threads_argument, make_output_folders
-from mgelens.imaging import Imaging, ImagingError, read_fits_image
+from mgelens.imaging import Imaging
+from mgelens.imaging_input import ImagingError, read_fits_image
 from mgelens.mask import circular
 from mgelens.mass import EPL
 from mgelens.plot import save_png

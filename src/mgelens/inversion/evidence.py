@@ -22,7 +22,7 @@ import scipy.linalg.lapack
 import scipy.sparse
 import scipy.sparse.linalg
 
-from mgelens.inversion.solve import InversionError
+from mgelens.inversion.cholesky import InversionError
 
 
 def log_det_cholesky(A: np.ndarray) -> float:

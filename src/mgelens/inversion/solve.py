@@ -8,76 +8,31 @@ regularization, SPEC §6.1) and D the data vector. Minimising
   (:func:`reconstruction_positive_negative`);
 * the non-negative ("nn-MGE", the paper's default) solution min Φ subject to x ≥ 0, by the fast
   NNLS of Bro & De Jong (1997) on the normal equations, reproducing the anchor's variant
-  (:func:`reconstruction_positive_only`);
+  (:func:`mgelens.inversion.nnls.reconstruction_positive_only`);
 * either of them with some unknowns forced to zero (:func:`solve_linear_system`).
 
 Every failure (Q not positive definite, non-finite solution, NNLS iteration cap, degenerate
-pn source) raises :class:`InversionError`; a sampler rejects the sample (SPEC §8.4).
-
-Implementation of the NNLS: the upper Cholesky factor U of Q_PP (UᵀU = Q_PP, P the passive set
-in factor order) and y = U⁻ᵀD_P are kept up to date. An entering index borders U by one
-triangular solve; leaving indices are deleted by Givens rotations applied to U and y, or U is
-refactorised when that is cheaper. Each sub-problem solve is then one back substitution
-z_P = U⁻¹y. The anchor's initial passive set is factorised in order of decreasing unconstrained
-value, so that the indices most likely to leave sit at the end of the factor, where deleting
-them is cheap. The order changes the rounding only, not the iterates.
-
-Each outer iteration lets the :data:`ENTERING_BLOCK` unknowns of largest positive gradient
-enter at once, bordering U with one blocked triangular solve (one pass over U for all of
-them). This changes the iterates, not the result: Q is positive definite, so the constrained
-minimum is unique and the stopping test is the KKT condition. Block members whose
-restricted solution is not positive leave again at once, without a step (a step would be
-α = 0 and send the useful members out too; on M2's MASS systems that made every block of
-6 leave and cost twice the iterations). An outer iteration that leaves the passive set
-unchanged is followed by a single-entry one (Lawson–Hanson's step, which always makes
-progress).
+pn source) raises :class:`~mgelens.inversion.cholesky.InversionError`; a sampler rejects the
+sample (SPEC §8.4).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.linalg.lapack
 
-from mgelens._jit import njit
-
-EPSILON = 2.2204e-16
-"""Machine epsilon as written in the anchor; the NNLS tolerance is n·EPSILON (absolute)."""
-MAX_ITERATIONS = 10_000
-"""Cap on outer and on (cumulative) inner NNLS iterations before :class:`InversionError`."""
-STAGNATION_LIMIT = 3
-"""The NNLS stops when the passive set is unchanged for this many consecutive outer iterations."""
-ENTERING_BLOCK = 10
-"""Unknowns entering the passive set per outer NNLS iteration (the largest gradients):
-fewer outer iterations per solve, each a little dearer; 10 is the fastest measured
-(docs/design_notes.md, "NNLS entering block")."""
-_REFACTOR_SPEEDUP = 6.0
-"""Time of a Givens element operation over that of a LAPACK Cholesky flop (measured 4–8)."""
-_FASTMATH = {"reassoc", "contract", "nsz"}
-"""Lets LLVM vectorise the reductions (no assumptions about NaN or infinity)."""
-
-
-class InversionError(RuntimeError):
-    """A linear solve of the inversion failed; the sample is to be rejected (SPEC §8.4)."""
-
-
-@dataclass(frozen=True)
-class NNLSResult:
-    """Output of :func:`reconstruction_positive_only`.
-
-    Attributes
-    ----------
-    x : numpy.ndarray
-        Solution, float64, exactly zero off the passive set.
-    passive : numpy.ndarray
-        Bool mask of the final passive (unconstrained) set.
-    n_iterations : int
-        Number of outer iterations (indices that entered the passive set).
-    """
-
-    x: np.ndarray
-    passive: np.ndarray
-    n_iterations: int
+from mgelens.inversion.cholesky import (
+    InversionError,
+    cholesky_solve,
+    finite_solution,
+    upper_cholesky,
+    validated_system,
+)
+from mgelens.inversion.nnls import (
+    back_substitute_scatter,
+    forward_substitute_transposed,
+    reconstruction_positive_only,
+)
 
 
 @dataclass(frozen=True)
@@ -133,147 +88,11 @@ def reconstruction_positive_negative(
     InversionError
         If Q is not positive definite, the solution is not finite, or the source is flat.
     """
-    Q, D = _validated(Q, D)
-    x = _cholesky_solve(Q, D)
+    Q, D = validated_system(Q, D)
+    x = cholesky_solve(Q, D)
     if source_block is not None:
         _check_source_not_flat(x[source_block])
     return x
-
-
-def reconstruction_positive_only(
-    Q: np.ndarray,
-    D: np.ndarray,
-    initial_passive: np.ndarray | None = None,
-    use_initial_passive: bool = True,
-    max_iterations: int = MAX_ITERATIONS,
-    unconstrained: np.ndarray | None = None,
-) -> NNLSResult:
-    """Minimise Φ(x) = xᵀQx − 2Dᵀx subject to x ≥ 0 (fast NNLS, SPEC §6.3).
-
-    Bro & De Jong's active-set method on the normal equations, as the anchor's
-    ``fnnls_cholesky``::
-
-        P ← initial passive set; x ← 0; w ← D − Qx (= D); tol ← n·2.2204e−16
-        if P ≠ ∅: z_P ← Q_PP⁻¹D_P; x ← max(z, 0)
-        while P ≠ all and max_{j∉P} w_j > tol:
-            P ← P ∪ {argmax_{j∉P} w_j}; z_P ← Q_PP⁻¹D_P, z ← 0 off P
-            while min_{j∈P} z_j ≤ tol:
-                α ← min over {j∈P: z_j ≤ tol} of x_j/(x_j − z_j); x ← x + α(z − x)
-                P ← P minus {j: x_j ≤ tol}; z_P ← Q_PP⁻¹D_P, z ← 0 off P
-            x ← z; w ← D − Qx
-
-    Anchor specifics reproduced: the initial passive set is {j: (Q⁻¹D)_j > 0}; the
-    tolerance is absolute, n·2.2204e−16; the loop stops when P is unchanged for 3
-    consecutive outer iterations.
-
-    Deliberate deviation from the anchor: the anchor starts from x = max(z, 0) and takes the
-    first gradient at x = 0 (w = D). When D ≤ tol off P that skips the loop and returns a
-    point that is not the constrained minimum (common for small systems). Here the start is
-    made feasible instead: unknowns whose restricted solution is ≤ tol leave P until the
-    restricted solution is positive, then x = z and w = D − Qx is the true gradient. The
-    result is the exact NNLS minimum from the same starting set.
-
-    Second deviation, for speed: up to :data:`ENTERING_BLOCK` unknowns (those of largest
-    w_j > tol) enter per outer iteration, one after a stagnant iteration (module docstring).
-    Outer iterations therefore count entering blocks. Within the inner loop, entered
-    unknowns still at x_j = 0 whose z_j ≤ tol leave before any step is taken.
-
-    Two guards that change nothing in the generic case: the blocking index of each inner step
-    is set to exactly 0 (rounding could otherwise leave it above an absolute tolerance when x
-    is large), and α is taken over the indices with x_j > z_j only and capped at 1 (the ratio
-    is undefined or above 1 only when x_j ≤ tol, an index that leaves anyway).
-
-    Parameters
-    ----------
-    Q : numpy.ndarray
-        (n, n) symmetric positive-definite matrix.
-    D : numpy.ndarray
-        (n,) data vector.
-    initial_passive : numpy.ndarray, optional
-        (n,) bool initial passive set; overrides ``use_initial_passive``.
-    use_initial_passive : bool
-        Start from the positive set of the unconstrained solution (anchor default); otherwise
-        start from the empty set (classic fnnls, where w = D is the true gradient).
-    max_iterations : int
-        Cap on the outer and on the cumulative inner iterations.
-    unconstrained : numpy.ndarray, optional
-        Q⁻¹D if the caller has it already (the default start then needs no Cholesky of Q).
-
-    Returns
-    -------
-    NNLSResult
-        Solution, final passive set and number of outer iterations.
-
-    Raises
-    ------
-    InversionError
-        If a Cholesky factorisation fails (Q or a passive block not positive definite), an
-        iteration cap is reached or the solution is not finite. Only the default start
-        factorises the whole of Q; otherwise a non-PD Q is noticed only through a passive block.
-    """
-    Q, D = _validated(Q, D)
-    n = D.size
-    tol = n * EPSILON
-    if initial_passive is not None:
-        passive = np.array(initial_passive, dtype=bool)
-        if passive.shape != (n,):
-            raise ValueError(f"initial_passive must have shape ({n},), got {passive.shape}")
-        order = np.flatnonzero(passive)
-    elif use_initial_passive:
-        if unconstrained is None:
-            unconstrained = _cholesky_solve(Q, D)
-        passive = unconstrained > 0.0
-        if passive.all():
-            return NNLSResult(x=unconstrained, passive=passive, n_iterations=0)
-        order = _by_decreasing(unconstrained, np.flatnonzero(passive))
-    else:
-        passive = np.zeros(n, dtype=bool)
-        order = np.flatnonzero(passive)
-    factor = _PassiveCholesky(Q, D)
-    factor.reset(order)
-
-    x = np.zeros(n)
-    n_outer = n_inner = stagnant = 0
-    if passive.any():
-        z, z_min = factor.solution()
-        while z_min <= tol:  # feasible warm start: see the docstring
-            if n_inner >= max_iterations:
-                raise InversionError(f"NNLS reached {max_iterations} inner iterations")
-            n_inner += 1
-            positions = np.flatnonzero(z[factor.passive_order] <= tol)[::-1]
-            passive[factor.passive_order[positions]] = False
-            factor.remove(positions)
-            z, z_min = factor.solution()
-        x = z
-    gradient = np.empty(n)
-    block = ENTERING_BLOCK
-    entering = _largest_gradients_off_passive(Q, D, x, passive, tol, block, gradient)
-    while entering.size:
-        if n_outer >= max_iterations:
-            raise InversionError(f"NNLS reached {max_iterations} outer iterations")
-        n_outer += 1
-        previous = passive.copy()
-        factor.append(entering)
-        passive[entering] = True
-        z, z_min = factor.solution()
-        while z_min <= tol:
-            if n_inner >= max_iterations:
-                raise InversionError(f"NNLS reached {max_iterations} inner iterations")
-            n_inner += 1
-            leaving = _step_to_boundary(x, z, factor.passive_order, tol)
-            passive[factor.passive_order[leaving]] = False
-            factor.remove(leaving)
-            z, z_min = factor.solution()
-        x = z
-        unchanged = np.array_equal(passive, previous)
-        stagnant = stagnant + 1 if unchanged else 0
-        if stagnant >= STAGNATION_LIMIT:
-            break
-        block = 1 if unchanged else ENTERING_BLOCK
-        entering = _largest_gradients_off_passive(Q, D, x, passive, tol, block, gradient)
-    if not np.all(np.isfinite(x)):
-        raise InversionError("NNLS gave a non-finite solution")
-    return NNLSResult(x=x, passive=passive, n_iterations=n_outer)
 
 
 def solve_linear_system(
@@ -328,7 +147,7 @@ def solve_linear_system(
     ValueError
         If ``fixed_zero`` is given with ``positive_only=False`` or has the wrong shape.
     """
-    Q, D = _validated(Q, D)
+    Q, D = validated_system(Q, D)
     n = D.size
     if not positive_only and fixed_zero is not None:
         raise ValueError("fixed_zero applies to the positive-only solve only (SPEC §6.3)")
@@ -392,38 +211,29 @@ def _solve_source_first(
     x = np.zeros(n)
     if positive_only and start is not None:
         # the warm-started NNLS needs no factor of Q: only ln det(F_SS + H) is wanted
-        U = _upper_cholesky(Q[source_block, source_block].copy())
+        U = upper_cholesky(Q[source_block, source_block].copy())
         log_det_source = float(2.0 * np.sum(np.log(np.diag(U))))
         result = reconstruction_positive_only(reduced_q, reduced_d, initial_passive=start)
         x[free] = result.x
         return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
     order = np.concatenate([a, e, m])
-    U = _upper_cholesky(Q[np.ix_(order, order)])
+    U = upper_cholesky(Q[np.ix_(order, order)])
     log_det_source = float(2.0 * np.sum(np.log(np.diag(U)[:n_s])))
     work = np.empty(n)
     if not positive_only:
         y = np.empty(n)
-        _forward_substitute_transposed(U, n, D[order], y)
-        _back_substitute_scatter(U, n, y, order, work, x)
-        _check_source_not_flat(_finite(x)[source_block])
+        forward_substitute_transposed(U, n, D[order], y)
+        back_substitute_scatter(U, n, y, order, work, x)
+        _check_source_not_flat(finite_solution(x)[source_block])
         return LinearSolution(x, False, np.zeros(n, dtype=bool), 0, log_det_source)
     reduced_order = np.concatenate([a, m])
     unconstrained = np.zeros(n)  # scattered back to the original index order of the NNLS
-    unconstrained[reduced_order] = _finite(_reduced_solve(U, n_a, n_s, D[reduced_order], work))
+    unconstrained[reduced_order] = finite_solution(
+        _reduced_solve(U, n_a, n_s, D[reduced_order], work)
+    )
     result = reconstruction_positive_only(reduced_q, reduced_d, unconstrained=unconstrained[free])
     x[free] = result.x
     return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
-
-
-def _upper_cholesky(U: np.ndarray) -> np.ndarray:
-    """U with UᵀU = the C-ordered matrix passed in, computed in place (upper triangle; the
-    strict lower triangle is zeroed); :class:`InversionError` if it is not positive
-    definite."""
-    # U.T is Fortran-ordered: LAPACK writes L there in place, i.e. U = Lᵀ into U.
-    _, info = scipy.linalg.lapack.dpotrf(U.T, lower=1, clean=1, overwrite_a=1)
-    if info != 0:
-        raise InversionError(f"matrix not positive definite (potrf info {info})")
-    return U
 
 
 def _reduced_solve(U: np.ndarray, n_a: int, n_s: int, b: np.ndarray, work: np.ndarray):
@@ -436,299 +246,15 @@ def _reduced_solve(U: np.ndarray, n_a: int, n_s: int, b: np.ndarray, work: np.nd
     except np.linalg.LinAlgError as error:
         raise InversionError(f"matrix not positive definite: {error}") from error
     y_a = np.empty(n_a)
-    _forward_substitute_transposed(U, n_a, b[:n_a], y_a)
+    forward_substitute_transposed(U, n_a, b[:n_a], y_a)
     y_m = scipy.linalg.solve_triangular(corner_u, b[n_a:] - u_am.T @ y_a, trans="T")
     x_m = scipy.linalg.solve_triangular(corner_u, y_m)
     x_a = np.empty(n_a)
-    _back_substitute_scatter(U, n_a, y_a - u_am @ x_m, np.arange(n_a), work, x_a)
+    back_substitute_scatter(U, n_a, y_a - u_am @ x_m, np.arange(n_a), work, x_a)
     return np.concatenate([x_a, x_m])
-
-
-def _validated(Q: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Q and D as C-contiguous float64 arrays, checking that Q is square and matches D."""
-    Q = np.ascontiguousarray(Q, dtype=np.float64)
-    D = np.ascontiguousarray(D, dtype=np.float64)
-    if Q.ndim != 2 or D.ndim != 1 or Q.shape != (D.size, D.size):
-        raise ValueError(f"Q must be (n, n) and D (n,), got {Q.shape} and {D.shape}")
-    return Q, D
-
-
-def _cholesky_solve(Q: np.ndarray, D: np.ndarray) -> np.ndarray:
-    """Q⁻¹D by Cholesky; :class:`InversionError` if Q is not PD or Q⁻¹D is not finite."""
-    try:
-        factor = scipy.linalg.cho_factor(Q, lower=True, check_finite=False)
-    except np.linalg.LinAlgError as error:
-        raise InversionError(f"matrix not positive definite: {error}") from error
-    return _finite(scipy.linalg.cho_solve(factor, D, check_finite=False))
 
 
 def _check_source_not_flat(source: np.ndarray) -> None:
     """The anchor's pn sanity check: reject a solution whose source values are all equal."""
     if source.size and np.allclose(source, source[0]):
         raise InversionError("pn solve rejected: all source values are equal")
-
-
-def _finite(x: np.ndarray) -> np.ndarray:
-    """``x``, or :class:`InversionError` if a Cholesky solve gave non-finite values."""
-    if not np.all(np.isfinite(x)):
-        raise InversionError("Cholesky solve gave a non-finite solution")
-    return x
-
-
-def _by_decreasing(values: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """``indices`` sorted by decreasing ``values`` (stable)."""
-    return indices[np.argsort(-values[indices], kind="stable")]
-
-
-class _PassiveCholesky:
-    """Upper Cholesky factor of Q_PP for an ordered passive set, updated in place.
-
-    With ``p`` passive unknowns ``order[:p]``, ``U[:p, :p]`` holds U with
-    UᵀU = Q[order, order] (only the upper triangle is meaningful) and ``y[:p]`` holds
-    U⁻ᵀD[order], so the restricted solution is U⁻¹y.
-    """
-
-    def __init__(self, Q: np.ndarray, D: np.ndarray):
-        n = D.size
-        self.Q, self.D = Q, D
-        self.U = np.empty((n, n))
-        self.y = np.empty(n)
-        self.order = np.empty(n, dtype=np.int64)
-        self.p = 0
-        self._work = np.empty(n)
-
-    @property
-    def passive_order(self) -> np.ndarray:
-        """The passive unknowns in factor order (a view)."""
-        return self.order[: self.p]
-
-    def reset(self, indices: np.ndarray) -> None:
-        """Factorise Q_PP afresh for the unknowns ``indices``, in that order."""
-        p = indices.size
-        self.order[:p] = indices
-        self.p = p
-        if p == 0:
-            return
-        block = self.Q.take(indices, axis=0).take(indices, axis=1)
-        # block.T is Fortran-ordered: LAPACK writes L there in place, i.e. U = Lᵀ into block.
-        _, info = scipy.linalg.lapack.dpotrf(block.T, lower=1, clean=1, overwrite_a=1)
-        if info != 0:
-            raise InversionError(f"passive-set matrix not positive definite (potrf info {info})")
-        self.U[:p, :p] = block
-        _forward_substitute_transposed(self.U, p, self.D[indices], self.y)
-
-    def append(self, indices: np.ndarray) -> None:
-        """Add ``indices`` at the end of the factor order (one blocked triangular solve)."""
-        p, k = self.p, indices.size
-        self.order[p : p + k] = indices
-        rows = self.Q[indices]
-        if _append_columns(self.U, p, self.y, rows, self.order, self.D[indices]):
-            self.p = p + k
-        else:  # rounding made a new pivot non-positive: try a fresh factorisation
-            self.reset(self.order[: p + k].copy())
-
-    def remove(self, positions: np.ndarray) -> None:
-        """Delete the unknowns at ``positions`` (factor order, descending) from the factor.
-
-        Deleting position k by Givens costs about (p − k)(2p − k) element operations, a fresh
-        factorisation p³/3 + 2p² flops at LAPACK speed; the cheaper one is used.
-        """
-        if positions.size == 0:
-            return
-        p = self.p
-        givens_cost = sum((p - k) * (2 * p - k) for k in positions.tolist())
-        if givens_cost * _REFACTOR_SPEEDUP > p**3 / 3.0 + 2.0 * p * p:
-            self.reset(np.delete(self.order[:p], positions))
-        else:
-            self.p = _delete_positions(self.U, p, self.y, self.order, positions)
-
-    def solution(self) -> tuple[np.ndarray, float]:
-        """(n,) solution of the restricted problem (zero off P) and its minimum over P."""
-        z = np.zeros(self.D.size)
-        z_min = _back_substitute_scatter(self.U, self.p, self.y, self.order, self._work, z)
-        return z, z_min
-
-
-@njit
-def _step_to_boundary(x, z, passive_order, tol):
-    """Inner NNLS step, in place on x; returns the leaving positions (descending).
-
-    If some passive unknowns are at zero (x_j ≤ tol: members of the entering block) with
-    z_j ≤ tol, they leave and x stays: they should not have entered, and the step
-    below would be α = 0 and send the whole block back out, the useful members too.
-    Otherwise α = min over passive j with z_j ≤ tol and x_j > z_j of x_j/(x_j − z_j),
-    capped at 1; x ← x + α(z − x) with the blocking unknown set exactly to 0 (x ← z if
-    α = 1), and the passive unknowns with x_j ≤ tol leave. Returns their positions in
-    ``passive_order``.
-    """
-    leaving = np.empty(passive_order.size, dtype=np.int64)
-    count = 0
-    for position in range(passive_order.size - 1, -1, -1):
-        j = passive_order[position]
-        if x[j] <= tol and z[j] <= tol:
-            leaving[count] = position
-            count += 1
-    if count:
-        return leaving[:count]
-    alpha = 1.0
-    blocking = -1
-    for j in passive_order:
-        if z[j] <= tol and x[j] > z[j]:
-            ratio = x[j] / (x[j] - z[j])
-            if ratio < alpha:
-                alpha = ratio
-                blocking = j
-    if blocking < 0:
-        x[:] = z
-    else:
-        for k in range(x.size):
-            x[k] += alpha * (z[k] - x[k])
-        x[blocking] = 0.0
-    for position in range(passive_order.size - 1, -1, -1):
-        if x[passive_order[position]] <= tol:
-            leaving[count] = position
-            count += 1
-    return leaving[:count]
-
-
-@njit(fastmath=_FASTMATH)
-def _back_substitute_scatter(U, p, y, order, work, z):
-    """Solve U[:p, :p] w = y[:p], scatter z[order[:p]] = w; return min(w) (inf if p = 0)."""
-    z_min = np.inf
-    for i in range(p - 1, -1, -1):
-        row = U[i, i + 1 : p]
-        tail = work[i + 1 : p]
-        total = 0.0
-        for c in range(row.size):
-            total += row[c] * tail[c]
-        value = (y[i] - total) / U[i, i]
-        work[i] = value
-        z[order[i]] = value
-        z_min = min(z_min, value)
-    return z_min
-
-
-@njit(fastmath=_FASTMATH)
-def _forward_substitute_transposed(U, p, b, u):
-    """Solve U[:p, :p]ᵀ u = b[:p] for upper-triangular U (column-oriented, in u)."""
-    u[:p] = b[:p]
-    for k in range(p):
-        u[k] /= U[k, k]
-        uk = u[k]
-        row = U[k, k + 1 : p]
-        tail = u[k + 1 : p]
-        for i in range(row.size):
-            tail[i] -= uk * row[i]
-
-
-@njit(fastmath=_FASTMATH)
-def _append_columns(U, p, y, rows, order, d_new):
-    """Border U[:p, :p] for the unknowns ``order[p:p + k]`` whose rows of Q are ``rows`` (k, n).
-
-    V = U⁻ᵀ Q[order[:p], new] for all k columns in one pass over U's rows, then the new k×k corner
-    column by column: t = (Q_new,new − the parts already known) / pivots, pivot
-    sqrt(Q_jj − |V_j|² − |t|²), and y extended the same way. Returns False, leaving p
-    meaningful entries of U and y untouched, if a pivot is not positive.
-    """
-    k = rows.shape[0]
-    v = np.empty((k, p))
-    for j in range(k):
-        for r in range(p):
-            v[j, r] = rows[j, order[r]]
-    for r in range(p):  # Uᵀ v = Q[P, new]: row r of U is read once (from cache) per column
-        row = U[r, r + 1 : p]
-        for j in range(k):
-            value = v[j, r] / U[r, r]
-            v[j, r] = value
-            tail = v[j, r + 1 : p]
-            for i in range(row.size):
-                tail[i] -= value * row[i]
-    column = np.empty(p + k)
-    for j in range(k):
-        column[:p] = v[j]
-        for i in range(j):  # rows of the corner already appended
-            total = rows[j, order[p + i]]
-            for r in range(p + i):
-                total -= U[r, p + i] * column[r]
-            column[p + i] = total / U[p + i, p + i]
-        pivot = rows[j, order[p + j]]
-        projected = d_new[j]
-        for r in range(p + j):
-            pivot -= column[r] * column[r]
-            projected -= column[r] * y[r]
-        if not pivot > 0.0:
-            return False
-        root = np.sqrt(pivot)
-        for r in range(p + j):
-            U[r, p + j] = column[r]
-        U[p + j, p + j] = root
-        y[p + j] = projected / root
-    return True
-
-
-@njit
-def _delete_positions(U, p, y, order, positions):
-    """Delete the unknowns at ``positions`` (descending) from U[:p, :p], y and order.
-
-    Dropping column k of U leaves rows k.. upper Hessenberg; Givens rotations of rows
-    (i, i+1), i = k..p−2, restore the triangle (the last row becomes zero and is dropped).
-    The same rotations applied to y keep Uᵀy = D_P. Returns the new p.
-    """
-    for k in positions:
-        for i in range(p):
-            start = max(k + 1, i)
-            source = U[i, start:p]
-            target = U[i, start - 1 : p - 1]
-            for c in range(source.size):
-                target[c] = source[c]
-        for i in range(k, p - 1):
-            a = U[i, i]
-            b = U[i + 1, i]
-            r = np.hypot(a, b)
-            cos = a / r
-            sin = b / r
-            U[i, i] = r
-            upper = U[i, i + 1 : p - 1]
-            lower = U[i + 1, i + 1 : p - 1]
-            for c in range(upper.size):
-                above = upper[c]
-                below = lower[c]
-                upper[c] = cos * above + sin * below
-                lower[c] = cos * below - sin * above
-            above = y[i]
-            below = y[i + 1]
-            y[i] = cos * above + sin * below
-            y[i + 1] = cos * below - sin * above
-            order[i] = order[i + 1]
-        p -= 1
-    return p
-
-
-@njit(fastmath=_FASTMATH)
-def _largest_gradients_off_passive(Q, D, x, passive, tol, k, gradient):
-    """Up to ``k`` unknowns off the passive set with w = D − Qx above ``tol``, largest
-    first (the lower index on ties); ``gradient`` is (n,) work space."""
-    for j in range(D.size):
-        gradient[j] = -np.inf
-        if passive[j]:
-            continue
-        row = Q[j]
-        total = 0.0
-        for c in range(row.size):
-            total += row[c] * x[c]
-        gradient[j] = D[j] - total
-    chosen = np.empty(k, dtype=np.int64)
-    count = 0
-    while count < k:
-        best = tol
-        index = -1
-        for j in range(D.size):
-            if gradient[j] > best:
-                best = gradient[j]
-                index = j
-        if index < 0:
-            break
-        chosen[count] = index
-        gradient[index] = -np.inf
-        count += 1
-    return chosen[:count]

@@ -332,6 +332,7 @@ def _stencil_rows(rows, cols, slim_index, psf, f_indptr, f_indices, f_values, po
     return g_t.T.copy()
 
 
+# Kept whole: one prange loop over chunks, whose steps share each chunk's scratch and partial sums.
 @njit(parallel=True)
 def _tile_curvature(
     tile_indptr,

@@ -1,7 +1,7 @@
 """Refusals of inputs a phase cannot fit, before any sampling (ISSUE 33, docs/reliability.md).
 
 A phase fits the pixels inside its circular mask. Each check below raises
-:class:`~mgelens.imaging.ImagingError` naming the lens's ``data.fits`` and the fix, so
+:class:`~mgelens.imaging_input.ImagingError` naming the lens's ``data.fits`` and the fix, so
 ``mgelens phase`` stops with one line and writes no ``result.json``:
 
 * the circle must lie inside the image (:func:`check_circle_inside`);
@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mgelens.imaging import Imaging, ImagingError
+from mgelens.imaging import Imaging
+from mgelens.imaging_input import ImagingError
 from mgelens.mask import SLACS_NOISE_THRESHOLD, largest_inside_radius
 
 MIN_SIGNAL_TO_NOISE = 5.0
