@@ -2,6 +2,8 @@
 to the same layer or one below, and every module has a layer."""
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 SOURCE = Path(__file__).resolve().parents[1] / "src" / "mgelens"
@@ -83,3 +85,16 @@ def test_the_check_sees_an_upward_import(tmp_path):
     path.write_text("def f():\n    from mgelens.search import sampler\n    return sampler\n")
     assert imported_modules(path) == {"mgelens.search.sampler"}
     assert layer_of("mgelens.search.sampler") > layer_of("mgelens.fit")
+
+
+def test_configuration_loads_no_numerics():
+    """The workflow validates settings on every DAG parse: pipeline.settings must stay free
+    of numba, scipy, dynesty and numpy (a fresh interpreter, so nothing is preloaded)."""
+    heavy = ("numba", "scipy", "dynesty", "numpy", "nautilus", "astropy")
+    code = (
+        f"import sys, mgelens.pipeline.settings; print([m for m in {heavy!r} if m in sys.modules])"
+    )
+    loaded = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.strip()
+    assert loaded == "[]"

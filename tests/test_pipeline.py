@@ -880,7 +880,7 @@ def test_adaptive_signals_setting_reaches_the_pixelized_phases(sersic_run, mock_
     for signals in ("anchor", "weighted"):
         settings = sersic_settings(adaptive_signals=signals)
         for build in (spix2_phase.problem, mass_phase.problem):
-            model = build(mock_dir, sersic_run, settings).model
+            model = build(mock_dir, sersic_run, settings, LENS).model
             assert model.describe()["source"]["adaptive_signals"] == signals
             assert model.build(values).source.regularization.signals == signals
 

@@ -36,13 +36,10 @@ from mgelens.mask import validate_mask
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.source.border import border_sub_pixels, relocate_to_border
 from mgelens.source.image_mesh import mask_extent_centre
-from mgelens.source.interpolate import (
-    INTERPOLATIONS,
-    natural_neighbour_weights,
-    nearest_cell_weights,
-)
+from mgelens.source.interpolate import natural_neighbour_weights, nearest_cell_weights
 from mgelens.source.mapping import SourceWeights, mapping_matrix
 from mgelens.source.mesh import MeshError, VoronoiMesh
+from mgelens.source.schemes import INTERPOLATIONS
 
 BORDER_RULE_OF_EDGE_RULE = {"anchor": "nearest_point", "continuous": "polygon"}
 

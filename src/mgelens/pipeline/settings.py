@@ -45,8 +45,7 @@ import yaml
 from mgelens import values
 from mgelens.fit_settings import FitSettings
 from mgelens.search.sampler_settings import SamplerSettings
-from mgelens.source.interpolate import INTERPOLATIONS
-from mgelens.source.schemes import SIGNAL_AVERAGES
+from mgelens.source.schemes import INTERPOLATIONS, SIGNAL_AVERAGES
 
 PHASES = ("sp", "spix1", "spix2", "light", "mass")
 """Phase names in chain order; each is also the name of the phase's result folder."""
@@ -432,8 +431,19 @@ def settings_from_mapping(
     if unknown:
         raise SettingsError(f"{origin}: unknown key slam.{unknown[0]}; known keys: {sorted(known)}")
     fit_settings = _merged_fit(base.fit, fit_section, origin)
-    samplers = dict(base.samplers)
-    section = content.pop("samplers", None) or {}
+    samplers = _merged_samplers(base.samplers, content.pop("samplers", None), origin)
+    try:
+        return dataclasses.replace(base, fit=fit_settings, samplers=samplers, **content)
+    except (TypeError, ValueError) as error:
+        raise SettingsError(f"{origin}: {error}") from error
+
+
+def _merged_samplers(
+    base: Mapping[str, SamplerSettings], section, origin: str
+) -> dict[str, SamplerSettings]:
+    """``base`` with each phase's entry of a ``slam: samplers:`` mapping merged into it."""
+    samplers = dict(base)
+    section = section or {}
     if not isinstance(section, Mapping):
         raise SettingsError(
             f"{origin}: slam.samplers must be a mapping of phase names to sampler settings, "
@@ -454,10 +464,7 @@ def settings_from_mapping(
             samplers[phase] = SamplerSettings.from_dict(merged)
         except (TypeError, ValueError) as error:  # the message starts with the key
             raise SettingsError(f"{origin}: slam.samplers.{phase}.{error}") from error
-    try:
-        return dataclasses.replace(base, fit=fit_settings, samplers=samplers, **content)
-    except (TypeError, ValueError) as error:
-        raise SettingsError(f"{origin}: {error}") from error
+    return samplers
 
 
 def _merged_fit(base: FitSettings, overrides: Mapping, origin: str) -> FitSettings:

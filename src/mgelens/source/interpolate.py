@@ -54,10 +54,6 @@ from mgelens.source.delaunay_kernels import (
 )
 from mgelens.source.mesh import MeshError, VoronoiMesh
 
-INTERPOLATIONS = ("natural_neighbour", "nearest")
-"""The source-plane interpolation schemes: natural-neighbour (Sibson) weights, or the
-nearest mesh cell with weight 1 (SPEC §4.4)."""
-
 COINCIDENCE_TOLERANCE = 1e-12
 """Distance, in units of the mesh extent, below which a query sits on a mesh point."""
 

@@ -1,6 +1,10 @@
 """Names of the source-plane schemes a setting chooses between (no numerics here, so that
 configuration can check a choice without loading the meshes)."""
 
+INTERPOLATIONS = ("natural_neighbour", "nearest")
+"""The source-plane interpolation schemes: natural-neighbour (Sibson) weights, or the
+nearest mesh cell with weight 1 (SPEC §4.4)."""
+
 EDGE_RULES = ("anchor", "continuous")
 """Treatments of the convex hull: the anchor's (discontinuous when a point joins or leaves
 the hull) or the continuous one (:attr:`mgelens.source.mesh.VoronoiMesh.ringed`)."""
