@@ -149,6 +149,17 @@ class Sersic:
         if not 0.2 <= self.sersic_index <= 10.0:
             raise ValueError(f"sersic_index must be in [0.2, 10], got {self.sersic_index}")
 
+    def to_dict(self) -> dict:
+        """The record of ``result.json`` (:func:`light_from_dict` reads it): ``kind``
+        "sersic", the geometry (:func:`geometry_record`), R_e (arcsec), n and I_e."""
+        return {
+            "kind": "sersic",
+            **geometry_record(self.centre, self.ell_comps),
+            "effective_radius": self.effective_radius,
+            "sersic_index": self.sersic_index,
+            "intensity": float(self.intensity),
+        }
+
     n_columns = 1
     """Columns a linear Sérsic adds to the linear system (its I_e)."""
 
@@ -259,6 +270,17 @@ class MGESet:
         """Everything its unit-intensity columns depend on."""
         return ("mge", *self.centre, *self.ell_comps, self.sigmas.tobytes())
 
+    def to_dict(self, intensities: np.ndarray) -> dict:
+        """The record of the set with its solved ``intensities`` I₀ (data units per pixel;
+        :func:`light_from_dict` reads it): ``kind`` "mge", the geometry
+        (:func:`geometry_record`), σ (minor axis, arcsec) and I₀."""
+        return {
+            "kind": "mge",
+            **geometry_record(self.centre, self.ell_comps),
+            "sigmas": self.sigmas.tolist(),
+            "intensities": np.asarray(intensities).tolist(),
+        }
+
     def gaussians(self, intensities: np.ndarray | None = None) -> list[Gaussian]:
         """The set as individual :class:`Gaussian` objects (unit intensity by default)."""
         values = np.ones(self.n_gaussians) if intensities is None else intensities
@@ -356,6 +378,31 @@ def _sersic_column(x, y, starts, sub_sizes, xc, yc, q, phi, log_re, inv_n, b_n):
                 acc += np.exp(b_n)
         out[p] = acc / n_sub
     return out
+
+
+def geometry_record(centre: tuple[float, float], ell_comps: tuple[float, float]) -> dict:
+    """A light component's geometry as recorded: centre (arcsec), ell_comps, and the axis
+    ratio and angle (degrees CCW from +x) they mean (SPEC §2.1)."""
+    q, angle = axis_ratio_and_angle_from(ell_comps)
+    return {"centre": list(centre), "ell_comps": list(ell_comps), "axis_ratio": q, "angle": angle}
+
+
+def light_from_dict(entry: dict) -> list:
+    """The profiles of one lens-light record (``to_dict`` of :class:`Sersic` or
+    :class:`MGESet`): the Sérsic, or the set's Gaussians with their intensities."""
+    centre, ell_comps = tuple(entry["centre"]), tuple(entry["ell_comps"])
+    if entry["kind"] == "sersic":
+        return [
+            Sersic(
+                centre,
+                ell_comps,
+                entry["effective_radius"],
+                entry["sersic_index"],
+                entry["intensity"],
+            )
+        ]
+    mge = MGESet(centre, ell_comps, entry["sigmas"])
+    return mge.gaussians(np.asarray(entry["intensities"], dtype=float))
 
 
 @dataclass(frozen=True)

@@ -23,8 +23,7 @@ import numpy as np
 
 from mgelens.fit import FitResult
 from mgelens.fit_settings import FitSettings
-from mgelens.geometry import axis_ratio_and_angle_from
-from mgelens.light import MGESet, Sersic
+from mgelens.light import Sersic, light_from_dict
 from mgelens.mass import mass_from_dict
 from mgelens.pipeline import models
 from mgelens.pipeline.settings import LENS_KEYS, LensSpec, SlamSettings, settings_from_mapping
@@ -41,27 +40,10 @@ class PhaseInputError(ValueError):
 
 
 def _light_record(component, intensities: np.ndarray) -> dict:
-    q, angle = axis_ratio_and_angle_from(component.ell_comps)
-    geometry = {
-        "centre": list(component.centre),
-        "ell_comps": list(component.ell_comps),
-        "axis_ratio": q,
-        "angle": angle,
-    }
+    """A lens-light component's record with its solved intensities."""
     if isinstance(component, Sersic):
-        return {
-            "kind": "sersic",
-            **geometry,
-            "effective_radius": component.effective_radius,
-            "sersic_index": component.sersic_index,
-            "intensity": float(intensities[0]),
-        }
-    return {
-        "kind": "mge",
-        **geometry,
-        "sigmas": component.sigmas.tolist(),
-        "intensities": intensities.tolist(),
-    }
+        return dataclasses.replace(component, intensity=float(intensities[0])).to_dict()
+    return component.to_dict(intensities)
 
 
 def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dict:
@@ -128,17 +110,7 @@ def light_components(record: dict) -> list[dict]:
 def profiles_from_record(record: dict) -> tuple:
     """Lens-light profiles with their intensities from a ``max_likelihood_fit`` record
     (see :func:`lens_light_profiles`)."""
-    profiles: list = []
-    for c in light_components(record):
-        centre, ell_comps = tuple(c["centre"]), tuple(c["ell_comps"])
-        if c["kind"] == "sersic":
-            profiles.append(
-                Sersic(centre, ell_comps, c["effective_radius"], c["sersic_index"], c["intensity"])
-            )
-        else:
-            mge = MGESet(centre, ell_comps, c["sigmas"])
-            profiles += mge.gaussians(np.asarray(c["intensities"], dtype=float))
-    return tuple(profiles)
+    return tuple(profile for c in light_components(record) for profile in light_from_dict(c))
 
 
 def lens_light_profiles(result_folder: str | Path) -> tuple:
