@@ -7,7 +7,6 @@ import shutil
 import subprocess
 import sys
 import time
-from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -485,12 +484,13 @@ def test_lens_spec_is_recorded_and_read_back(tmp_path):
     records written before they were apart (flat ``slam``) read into the same two."""
     settings = settings_from_mapping({"fit": {"sub_size": 3}, "source_pixels": 600})
     lens = LensSpec(mask_radius=1.5, mask_centre=(0.1, -0.2), mge_sets=6, point_set=False)
-    phase = SimpleNamespace(settings={"slam": settings.to_dict(), "lens": lens.to_dict()})
-    assert records.recorded_settings(phase) == (settings, lens)
+    record = {"slam": settings.to_dict(), "lens": lens.to_dict()}
+    assert records.recorded_settings(record) == (settings, lens)
     flat = {k: v for k, v in settings.to_dict().items() if k != "fit"}
     flat.update(settings.fit.to_dict())
     flat.update(lens.to_dict())
-    assert records.recorded_settings(SimpleNamespace(settings={"slam": flat})) == (settings, lens)
+    assert records.recorded_settings({"slam": flat}) == (settings, lens)
+    assert records.recorded_lens({"slam": {"mask_centre": [0, 1]}}).mask_centre == (0.0, 1.0)
 
 
 def test_sampler_for_raises_dynesty_live_points_to_its_minimum():

@@ -40,7 +40,7 @@ from mgelens.mock_study import (
     mock_table,
     relative_difference,
 )
-from mgelens.pipeline.records import MODEL_FILE, recorded_settings
+from mgelens.pipeline.records import MODEL_FILE, recorded_lens
 from mgelens.plot import save_png
 from mgelens.plot.mock_study import LightPanel, lens_light_figure
 from mgelens.search.results import PhaseResult
@@ -95,7 +95,7 @@ def _panel(results: Path, lens: str, mock: str) -> LightPanel:
     with fits.open(folder / "mass" / MODEL_FILE) as model:
         light, residuals = (np.array(model[name].data, float) for name in ("LENS", "NRESID"))
     radius = float(phase.settings["mask_radius"])
-    centre = recorded_settings(phase)[1].mask_centre
+    centre = recorded_lens(phase.settings).mask_centre
     mask = circular(true_light.shape, pixel_scale, radius, centre)
     return LightPanel(
         label=f"{lens} ({mock})",

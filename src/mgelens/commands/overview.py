@@ -21,7 +21,7 @@ from mgelens.fit import FitError, fit
 from mgelens.imaging_input import ImagingError
 from mgelens.overview import overview_from_fit
 from mgelens.pipeline.models import UnphysicalSample
-from mgelens.pipeline.records import PhaseInputError, recorded_settings
+from mgelens.pipeline.records import PhaseInputError, recorded_lens
 from mgelens.pipeline.run import max_likelihood_problem
 from mgelens.plot import save_png
 from mgelens.plot.overview import overview_figure
@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
             result,
             [spec.name for spec in problem.model.lens_light],
             problem.mask_radius,
-            recorded_settings(phase)[1].mask_centre,
+            recorded_lens(phase.settings).mask_centre,
             lens=lens,
             phase=phase.phase,
         )

@@ -24,6 +24,7 @@ Exit code 1 with a one-line error for missing or inconsistent inputs.
 
 import argparse
 import functools
+import json
 import logging
 from pathlib import Path
 
@@ -40,10 +41,10 @@ from mgelens.pipeline.records import (
     light_components,
     mass_model,
     read_fit_record,
-    recorded_settings,
+    recorded_lens,
 )
 from mgelens.quality import lensing_check, quality_statistic
-from mgelens.search.results import PhaseResult
+from mgelens.search.results import RESULT_FILE
 
 logger = logging.getLogger(__name__)
 
@@ -90,9 +91,8 @@ def read_residual_images(path: Path) -> tuple[np.ndarray, np.ndarray]:
 def run(args: argparse.Namespace) -> int:
     lens = args.lens or args.phase.resolve().parent.name
     try:
-        phase = PhaseResult.read(args.phase)
-        settings = phase.settings
-        _, spec = recorded_settings(phase)
+        settings = json.loads((args.phase / RESULT_FILE).read_text())["settings"]
+        spec = recorded_lens(settings)
         lens_dir = args.lens_dir or Path(settings["lens_dir"])
         circle = functools.partial(_circle, float(settings["mask_radius"]), spec.mask_centre)
         # the sheet's pixel scale, if the fit had one

@@ -47,7 +47,7 @@ from mgelens.isophote_recovery import (
 )
 from mgelens.isophotes import TABLE_COLUMNS, isophote_table
 from mgelens.mask import circular
-from mgelens.pipeline.records import MODEL_FILE, recorded_settings
+from mgelens.pipeline.records import MODEL_FILE, recorded_lens
 from mgelens.pipeline.run import max_likelihood_problem
 from mgelens.plot import save_png
 from mgelens.plot.isophote_recovery import isophote_recovery_figure
@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         with fits.open(args.phase / MODEL_FILE) as model:
             model_light, model_source = (np.array(model[name].data) for name in ("LENS", "LENSED"))
         pixel_scale = float(truth["observation"]["pixel_scale"])
-        mask_centre = recorded_settings(phase)[1].mask_centre
+        mask_centre = recorded_lens(phase.settings).mask_centre
         radius = float(phase.settings["mask_radius"])
         mask = circular(true_light.shape, pixel_scale, radius, mask_centre)
         true_mass = true_mass_parameters(truth)

@@ -27,7 +27,7 @@ from mgelens.light import Sersic, light_from_dict
 from mgelens.mass import mass_from_dict
 from mgelens.pipeline import models
 from mgelens.pipeline.settings import LENS_KEYS, LensSpec, SlamSettings, settings_from_mapping
-from mgelens.search.results import RESULT_FILE, PhaseResult
+from mgelens.search.results import RESULT_FILE
 
 MODEL_FILE = "model.fits"
 """A phase folder's images of its maximum-likelihood model (:mod:`mgelens.pipeline.products`)."""
@@ -131,21 +131,33 @@ def mass_model(result_folder: str | Path) -> tuple:
     return tuple(mass_from_dict(entry) for entry in read_fit_record(result_folder)["mass"])
 
 
-def recorded_settings(phase: PhaseResult) -> tuple[SlamSettings, LensSpec]:
-    """The chain's settings and the lens spec a phase ran with, from its ``result.json``.
+def recorded_settings(settings: dict) -> tuple[SlamSettings, LensSpec]:
+    """The chain's settings and the lens spec a phase ran with, from the ``settings``
+    record of its ``result.json`` (:attr:`~mgelens.search.results.PhaseResult.settings`).
 
     Results written before the fit settings nested under ``slam.fit`` and the per-lens
     values moved to ``lens`` (their ``slam`` record is flat, with ``mask_radius``,
     ``mask_centre``, ``pixel_scale``, ``mge_sets`` and ``point_set``, and no ``lens``)
     are read too: their keys are sorted into the same two records.
     """
-    recorded = dict(phase.settings["slam"])
-    lens = phase.settings.get("lens")
+    slam, lens = _sorted_record(settings)
+    chain = settings_from_mapping(slam, slam.pop("profile"), origin=RESULT_FILE)
+    return chain, lens
+
+
+def recorded_lens(settings: dict) -> LensSpec:
+    """The lens spec of a phase's ``settings`` record (see :func:`recorded_settings`)."""
+    return _sorted_record(settings)[1]
+
+
+def _sorted_record(settings: dict) -> tuple[dict, LensSpec]:
+    """The ``slam`` mapping (fit settings nested) and the lens spec of a settings record."""
+    slam = dict(settings["slam"])
+    lens = settings.get("lens")
     if lens is None:
-        lens = {key: recorded.pop(key) for key in LENS_KEYS if key in recorded}
+        lens = {key: slam.pop(key) for key in LENS_KEYS if key in slam}
         fit_keys = {f.name for f in dataclasses.fields(FitSettings)}
-        recorded["fit"] = {key: recorded.pop(key) for key in fit_keys if key in recorded}
+        slam["fit"] = {key: slam.pop(key) for key in fit_keys if key in slam}
     lens = dict(lens)
     lens["mask_centre"] = tuple(lens.get("mask_centre", (0.0, 0.0)))
-    settings = settings_from_mapping(recorded, recorded.pop("profile"), origin=RESULT_FILE)
-    return settings, LensSpec(**lens)
+    return slam, LensSpec(**lens)

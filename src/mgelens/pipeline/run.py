@@ -570,7 +570,7 @@ def max_likelihood_problem(
     (in a pooled MASS phase, with the k-means seed of the mesh whose run holds the
     highest-likelihood sample) and the earlier phases' files in ``results_dir``.
     """
-    settings, lens = recorded_settings(phase)
+    settings, lens = recorded_settings(phase.settings)
     best = [mesh for mesh in phase.settings.get("meshes", []) if mesh["holds_max_likelihood"]]
     if best:
         settings = dataclasses.replace(settings, kmeans_seed=int(best[0]["kmeans_seed"]))
