@@ -264,6 +264,19 @@ def test_non_negative_and_unconstrained_solutions_differ_on_lensed_arcs():
     assert np.all(nn.solution.x >= 0.0)
     assert np.any(nn.solution.active_zero)
     assert np.any(pn.lens_light_intensities < 0.0)
+    # the 3×Sérsic runs' solve (SPEC §8.1): lens light ≥ 0, source free. Its feasible set
+    # lies between nn's and pn's, so the minimised χ² + sᵀHs + μ|x_light|² lies between
+    free = fit(make_dataset(data, FitSettings(free_source=True, lp_sub_size_centre=8)), model)
+    assert np.all(free.lens_light_intensities >= 0.0)
+    assert np.any(free.lens_light_intensities == 0.0)
+    assert np.any(free.source.fluxes < 0.0)
+
+    def minimised(result):
+        mu = result.dataset.settings.mge_diagonal
+        light = result.lens_light_intensities
+        return result.chi_squared + result.regularization_term + mu * light @ light
+
+    assert minimised(pn) < minimised(free) < minimised(nn)
 
 
 def test_degenerate_mesh_is_rejected_not_raised():

@@ -380,6 +380,10 @@ def test_sersic_lens_light_needs_its_solve_stated():
     assert not settings_from_mapping(unconstrained).fit.positive_only
     explicit = {"lens_light_model": "sersic", "fit": {"positive_only": True}}
     assert settings_from_mapping(explicit).fit.positive_only
+    papers = {"lens_light_model": "sersic", "fit": {"positive_only": True, "free_source": True}}
+    assert settings_from_mapping(papers).fit.free_source
+    with pytest.raises(SettingsError, match=r"slam\.fit\.free_source applies to the non-neg"):
+        settings_from_mapping({"fit": {"positive_only": False, "free_source": True}})
     assert not settings_from_mapping({"fit": {"positive_only": False}}).fit.positive_only
 
 
@@ -765,6 +769,7 @@ def test_isophotes_of_a_phase_take_the_imaging_pixel_scale(sp_run, mock_dir, tmp
 
 # -- the 3×Sérsic chain -------------------------------------------------------------------
 def sersic_settings(positive_only=False, **changes):
+    """The 3×Sérsic chain, capped, every linear unknown free unless ``positive_only``."""
     capped = {"progress_every": 1e9, "n_live": 12}
     iterations = {"sp": 60, "spix1": 20, "spix2": 15, "light": 20, "mass": 20}
     return settings_from_mapping(

@@ -383,3 +383,41 @@ def test_inputs_are_validated_and_not_modified():
         reconstruction_positive_only(Q, D[:-1])
     with pytest.raises(ValueError, match="initial_passive"):
         reconstruction_positive_only(Q, D, initial_passive=np.ones(3, dtype=bool))
+
+
+def bounded_least_squares(Q, D, lower):
+    """The same minimum by scipy's bounded least squares (an independent algorithm): with
+    LᵀL = Q, ½xᵀQx − Dᵀx = ½|Lx − L⁻ᵀD|² + const."""
+    L = np.linalg.cholesky(Q).T
+    b = scipy.linalg.solve_triangular(L, D, trans="T")
+    return scipy.optimize.lsq_linear(L, b, bounds=(lower, np.inf), tol=1e-14).x
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_partly_constrained_solve_matches_bounded_least_squares(seed):
+    """Lens light ≥ 0, source free (the 3×Sérsic runs, SPEC §8.1): the Schur-complement
+    solve equals scipy's bounded least squares, some bounds active and source values of
+    both signs, and ln det of the source block equals a direct one."""
+    rng = np.random.default_rng(seed)
+    n_lens, n = 6, 40
+    A = rng.normal(size=(120, n))
+    Q = A.T @ A + 0.1 * np.eye(n)
+    D = A.T @ (A @ np.concatenate([rng.normal(size=n_lens), rng.normal(size=n - n_lens)]))
+    source = slice(n_lens, None)
+    solution = solve_linear_system(Q, D, unconstrained=source, source_block=source)
+    lower = np.where(np.arange(n) < n_lens, 0.0, -np.inf)
+    np.testing.assert_allclose(solution.x, bounded_least_squares(Q, D, lower), atol=1e-7)
+    assert np.any(solution.x[:n_lens] == 0.0)
+    assert np.all(solution.x[:n_lens] >= 0.0)
+    assert np.any(solution.x[source] < 0.0)
+    assert np.any(solution.x[source] > 0.0)
+    np.testing.assert_array_equal(solution.active_zero, solution.x == 0.0)
+    direct = np.linalg.slogdet(Q[source, source])[1]
+    assert solution.log_det_source == pytest.approx(direct, rel=1e-12)
+    # the limits: everything free is the unconstrained solve, nothing free the NNLS
+    free = solve_linear_system(Q, D, unconstrained=slice(0, None)).x
+    np.testing.assert_allclose(free, np.linalg.solve(Q, D), rtol=1e-9, atol=1e-12)
+    none = solve_linear_system(Q, D, unconstrained=slice(0, 0)).x
+    np.testing.assert_allclose(none, scipy_nnls(Q, D), atol=1e-8)
+    with pytest.raises(ValueError, match="unconstrained applies to the positive-only"):
+        solve_linear_system(Q, D, positive_only=False, unconstrained=source)

@@ -249,7 +249,8 @@ def test_the_paper_mock_comparison_is_nine_rows_each_with_its_lens_light_model(t
     assert "--results results/M1 " in output
     assert slam.format("true", "mge") in output
     assert slam.format("false", "mge") in output
-    assert slam.format("false", "sersic") in output
+    sersic = '"fit": {"free_source": true, "positive_only": true}, "lens_light_model": "sersic"'
+    assert f'--slam \'{{{sersic}, "profile": "quick"}}\'' in output
     whole = snakemake("-n", "--configfile", "config/paper_mocks.yaml", workdir=tmp_path)
     counts = job_counts(whole.stdout + whole.stderr)
     assert counts["simulate_mock"] == 9

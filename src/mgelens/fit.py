@@ -458,7 +458,8 @@ def fit(
     q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
     settings = dataset.settings
     fixed_zero = None
-    if operator is not None and settings.positive_only and settings.force_edge_pixels_to_zero:
+    constrained_source = settings.positive_only and not settings.free_source
+    if operator is not None and constrained_source and settings.force_edge_pixels_to_zero:
         fixed_zero = np.concatenate(
             [np.zeros(dense.shape[1], dtype=bool), operator.mesh.edge_pixels]
         )
@@ -469,6 +470,7 @@ def fit(
         fixed_zero=fixed_zero,
         source_block=slice(dense.shape[1], None) if operator is not None else None,
         passive_start=passive_start,
+        unconstrained=slice(lens_columns.shape[1], None) if settings.free_source else None,
     )
     return _scored(dataset, model, solution, fixed, lens_columns, source_columns, operator, system)
 

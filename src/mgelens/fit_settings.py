@@ -19,6 +19,12 @@ class FitSettings:
     ----------
     positive_only : bool
         Non-negative solve of all linear unknowns ("nn-MGE", default) or unconstrained ("pn").
+    free_source : bool
+        With ``positive_only``: keep only the lens light's intensities ≥ 0 and leave the
+        source's (source Gaussians, source pixels) free, as the paper's 3×Sérsic runs
+        (SPEC §8.1: source fluxes not constrained positive). Refused with
+        ``positive_only`` false, which frees every unknown already.
+        ``force_edge_pixels_to_zero`` does not apply to a free source.
     sub_size : int
         s of the s×s sub-grid that maps image pixels onto the source mesh (4).
     lp_sub_size, lp_sub_size_centre, lp_centre_radius : int, int, float
@@ -48,6 +54,7 @@ class FitSettings:
     """
 
     positive_only: bool = True
+    free_source: bool = False
     sub_size: int = 4
     lp_sub_size: int = 4
     lp_sub_size_centre: int = 16
@@ -63,6 +70,7 @@ class FitSettings:
         ValueError starts with the field's name."""
         checked = {
             "positive_only": values.boolean("positive_only", self.positive_only),
+            "free_source": values.boolean("free_source", self.free_source),
             "use_border": values.boolean("use_border", self.use_border),
             "force_edge_pixels_to_zero": values.boolean(
                 "force_edge_pixels_to_zero", self.force_edge_pixels_to_zero
@@ -76,6 +84,11 @@ class FitSettings:
         }
         for name in ("sub_size", "lp_sub_size", "lp_sub_size_centre"):
             checked[name] = values.integer(name, getattr(self, name), 1)
+        if checked["free_source"] and not checked["positive_only"]:
+            raise ValueError(
+                "free_source applies to the non-negative solve (positive_only true); with "
+                "positive_only false every unknown is free already"
+            )
         for name, value in checked.items():
             object.__setattr__(self, name, value)
 

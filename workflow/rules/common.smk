@@ -35,7 +35,7 @@ REPO = Path(workflow.basedir)
 LENS_LIGHT_SETTINGS = {
     "nn_mge": {"lens_light_model": "mge", "fit": {"positive_only": True}},
     "pn_mge": {"lens_light_model": "mge", "fit": {"positive_only": False}},
-    "sersic": {"lens_light_model": "sersic", "fit": {"positive_only": False}},
+    "sersic": {"lens_light_model": "sersic", "fit": {"positive_only": True, "free_source": True}},
 }
 """slam: settings of each value of the sheet's `lens_light` column (empty: nn_mge)."""
 
@@ -68,7 +68,9 @@ except WorkflowError as error:
 DATA_DIR = repo_path(config["data_dir"])
 if "lens_light" in LENSES.columns:
     _light_keys = [key for key in ("lens_light_model",) if key in config["slam"]] + [
-        f"fit.{key}" for key in ("positive_only",) if key in (config["slam"].get("fit") or {})
+        f"fit.{key}"
+        for key in ("positive_only", "free_source")
+        if key in (config["slam"].get("fit") or {})
     ]
     if _light_keys:
         raise WorkflowError(

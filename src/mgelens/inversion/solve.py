@@ -102,6 +102,7 @@ def solve_linear_system(
     fixed_zero: np.ndarray | None = None,
     source_block: slice | None = None,
     passive_start: np.ndarray | None = None,
+    unconstrained: slice | None = None,
 ) -> LinearSolution:
     """Solve the inversion's normal equations, optionally non-negative (SPEC §6.2–6.3).
 
@@ -134,6 +135,11 @@ def solve_linear_system(
         relative), but a start close to the final set needs far fewer iterations (a
         phase's samples share most of their passive set). Ignored by the unconstrained
         solve.
+    unconstrained : slice, optional
+        With ``positive_only``: unknowns left free of the non-negativity, the others kept
+        ≥ 0 (the 3×Sérsic runs' lens light non-negative and source free, SPEC §8.1;
+        :func:`_solve_partly_constrained`). ``fixed_zero`` does not apply then, and a
+        ``source_block`` must lie inside it.
 
     Returns
     -------
@@ -151,6 +157,13 @@ def solve_linear_system(
     n = D.size
     if not positive_only and fixed_zero is not None:
         raise ValueError("fixed_zero applies to the positive-only solve only (SPEC §6.3)")
+    if unconstrained is not None:
+        if not positive_only or fixed_zero is not None:
+            raise ValueError(
+                "unconstrained applies to the positive-only solve without fixed_zero "
+                "(the unknowns it frees are not bounded)"
+            )
+        return _solve_partly_constrained(Q, D, unconstrained, source_block, passive_start)
     free = np.ones(n, dtype=bool) if fixed_zero is None else ~np.asarray(fixed_zero, dtype=bool)
     if free.shape != (n,):
         raise ValueError(f"fixed_zero must have shape ({n},), got {free.shape}")
@@ -258,3 +271,54 @@ def _check_source_not_flat(source: np.ndarray) -> None:
     """The anchor's pn sanity check: reject a solution whose source values are all equal."""
     if source.size and np.allclose(source, source[0]):
         raise InversionError("pn solve rejected: all source values are equal")
+
+
+def _solve_partly_constrained(
+    Q: np.ndarray,
+    D: np.ndarray,
+    unconstrained: slice,
+    source_block: slice | None,
+    passive_start: np.ndarray | None,
+) -> LinearSolution:
+    """min ½xᵀQx − Dᵀx with x ≥ 0 except on the ``unconstrained`` unknowns F.
+
+    For any x_C of the constrained unknowns C the best x_F is Q_FF⁻¹(D_F − Q_FC x_C), so
+    x_C solves the NNLS of the Schur complement, Q′ = Q_CC − Q_CF Q_FF⁻¹ Q_FC (positive
+    definite, as Q is) and D′ = D_C − Q_CF Q_FF⁻¹ D_F, and x_F follows. With U_FᵀU_F =
+    Q_FF, W = U_F⁻ᵀQ_FC and w = U_F⁻ᵀD_F: Q′ = Q_CC − WᵀW, D′ = D_C − Wᵀw and
+    x_F = U_F⁻¹(w − W x_C). The factor U_F gives ln det of the source block when it is F.
+    """
+    n = D.size
+    free = np.zeros(n, dtype=bool)
+    free[unconstrained] = True
+    f, c = np.flatnonzero(free), np.flatnonzero(~free)
+    U = upper_cholesky(Q[np.ix_(f, f)])
+    W = scipy.linalg.solve_triangular(U, Q[np.ix_(f, c)], trans="T", check_finite=False)
+    w = scipy.linalg.solve_triangular(U, D[f], trans="T", check_finite=False)
+    x = np.zeros(n)
+    n_iterations = 0
+    if c.size:
+        start = None if passive_start is None else np.asarray(passive_start, dtype=bool)[c]
+        schur = Q[np.ix_(c, c)] - W.T @ W
+        reduced = reconstruction_positive_only(
+            0.5 * (schur + schur.T), D[c] - W.T @ w, initial_passive=start
+        )
+        x[c] = reduced.x
+        n_iterations = reduced.n_iterations
+    x[f] = finite_solution(scipy.linalg.solve_triangular(U, w - W @ x[c], check_finite=False))
+    log_det_source = None
+    if source_block is not None:
+        in_source = np.zeros(n, dtype=bool)
+        in_source[source_block] = True
+        if np.any(in_source & ~free):
+            raise ValueError("source_block must lie inside the unconstrained unknowns")
+        block = (
+            upper_cholesky(Q[source_block, source_block].copy())
+            if (np.any(free & ~in_source))
+            else U
+        )
+        log_det_source = float(2.0 * np.sum(np.log(np.diag(block))))
+        _check_source_not_flat(x[source_block])
+    active_zero = np.zeros(n, dtype=bool)
+    active_zero[c] = x[c] == 0.0
+    return LinearSolution(x, True, active_zero, n_iterations, log_det_source)

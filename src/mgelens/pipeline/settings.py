@@ -23,8 +23,8 @@ merged into the profile's. Unknown keys and values of the wrong type or range ra
 ``slam.samplers.mass.n_live``; :mod:`mgelens.values`). Example::
 
     slam:
-      lens_light_model: sersic    # the 3×Sérsic comparison
-      fit: {positive_only: false} # unconstrained solve (also pn-MGE with the MGE)
+      lens_light_model: sersic    # the 3×Sérsic comparison, its light non-negative
+      fit: {positive_only: true, free_source: true}   # and its source free
       samplers:
         mass: {n_live: 80}
 
@@ -79,9 +79,10 @@ class SlamSettings:
         (SPEC §8.1): 2 Sérsics with a shared centre in SP, fixed entirely (intensities
         too) in SPix1 and SPix2, 3 Sérsics in LIGHT, fitted together with the EPL in MASS.
         All Sérsic intensities are solved linearly. The paper's Sérsic runs did not
-        constrain the source positive, unlike its MGE runs, so a settings mapping (YAML
-        ``slam:`` section or ``--slam``) that sets ``lens_light_model: sersic`` must set
-        ``fit.positive_only`` too (:func:`settings_from_mapping` refuses it otherwise).
+        constrain the source positive, unlike its MGE runs (``fit: {positive_only: true,
+        free_source: true}``: Sérsic intensities ≥ 0, source free), so a settings mapping
+        (YAML ``slam:`` section or ``--slam``) that sets ``lens_light_model: sersic`` must
+        set ``fit.positive_only`` too (:func:`settings_from_mapping` refuses it otherwise).
     source_pixels : int
         k-means source pixels of SPix2, LIGHT and MASS (paper 1500).
     overlay_shape : (int, int)
@@ -411,8 +412,9 @@ def settings_from_mapping(
     if content.get("lens_light_model") == "sersic" and "positive_only" not in fit_section:
         raise SettingsError(
             f"{origin}: slam.lens_light_model: sersic needs slam.fit.positive_only set too: "
-            "false for the paper's unconstrained 3×Sérsic solve (SPEC §8.1), true for "
-            "non-negative intensities; the default (true) is the MGE's"
+            "true with free_source: true for the paper's 3×Sérsic solve (lens light "
+            "non-negative, source free, SPEC §8.1), true alone for every unknown "
+            "non-negative, false for every unknown free; the default (true) is the MGE's"
         )
     profile = profile or content.pop("profile", None) or DEFAULT_PROFILE
     content.pop("profile", None)
