@@ -67,10 +67,11 @@ except WorkflowError as error:
     raise WorkflowError(f"sample sheet {SAMPLE_SHEET}: {error}") from None
 DATA_DIR = repo_path(config["data_dir"])
 if "lens_light" in LENSES.columns:
-    _light_keys = [key for key in ("lens_light_model",) if key in config["slam"]] + [
-        f"fit.{key}"
-        for key in ("positive_only", "free_source")
-        if key in (config["slam"].get("fit") or {})
+    _column_keys = {key for s in LENS_LIGHT_SETTINGS.values() for key in s if key != "fit"}
+    _column_fit_keys = {key for s in LENS_LIGHT_SETTINGS.values() for key in s["fit"]}
+    _config_fit = config["slam"].get("fit") or {}
+    _light_keys = [key for key in sorted(_column_keys) if key in config["slam"]] + [
+        f"fit.{key}" for key in sorted(_column_fit_keys) if key in _config_fit
     ]
     if _light_keys:
         raise WorkflowError(

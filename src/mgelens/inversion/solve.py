@@ -313,9 +313,7 @@ def _solve_partly_constrained(
         if np.any(in_source & ~free):
             raise ValueError("source_block must lie inside the unconstrained unknowns")
         block = (
-            upper_cholesky(Q[source_block, source_block].copy())
-            if (np.any(free & ~in_source))
-            else U
+            upper_cholesky(Q[source_block, source_block].copy()) if np.any(free & ~in_source) else U
         )
         log_det_source = float(2.0 * np.sum(np.log(np.diag(block))))
         _check_source_not_flat(x[source_block])

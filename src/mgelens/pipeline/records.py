@@ -22,11 +22,16 @@ from pathlib import Path
 import numpy as np
 
 from mgelens.fit import FitResult
-from mgelens.fit_settings import FitSettings
 from mgelens.light import Sersic, light_from_dict
 from mgelens.mass import mass_from_dict
 from mgelens.pipeline import models
-from mgelens.pipeline.settings import LENS_KEYS, LensSpec, SlamSettings, settings_from_mapping
+from mgelens.pipeline.settings import (
+    FIT_KEYS,
+    LENS_KEYS,
+    LensSpec,
+    SlamSettings,
+    settings_from_mapping,
+)
 from mgelens.search.results import RESULT_FILE
 
 MODEL_FILE = "model.fits"
@@ -156,8 +161,5 @@ def _sorted_record(settings: dict) -> tuple[dict, LensSpec]:
     lens = settings.get("lens")
     if lens is None:
         lens = {key: slam.pop(key) for key in LENS_KEYS if key in slam}
-        fit_keys = {f.name for f in dataclasses.fields(FitSettings)}
-        slam["fit"] = {key: slam.pop(key) for key in fit_keys if key in slam}
-    lens = dict(lens)
-    lens["mask_centre"] = tuple(lens.get("mask_centre", (0.0, 0.0)))
+        slam["fit"] = {key: slam.pop(key) for key in FIT_KEYS if key in slam}
     return slam, LensSpec(**lens)

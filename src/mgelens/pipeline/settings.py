@@ -62,6 +62,10 @@ PRIOR_PASSING_RULES = ("paper", "2024")
 SP_STARTS = ("prior", "search")
 
 
+FIT_KEYS = frozenset(f.name for f in dataclasses.fields(FitSettings))
+"""The keys of a ``slam: fit:`` mapping (:class:`~mgelens.fit_settings.FitSettings`)."""
+
+
 class SettingsError(ValueError):
     """Invalid settings: the message names the file, the key and the accepted values."""
 
@@ -425,7 +429,7 @@ def settings_from_mapping(
     base = profile_settings(profile)
     known = {f.name for f in dataclasses.fields(SlamSettings)} - {"profile"}
     unknown = sorted(set(content) - known)
-    moved = [key for key in unknown if key in {f.name for f in dataclasses.fields(FitSettings)}]
+    moved = [key for key in unknown if key in FIT_KEYS]
     if moved:
         raise SettingsError(
             f"{origin}: slam.{moved[0]} is a fit setting: give it as slam.fit.{moved[0]}"
@@ -471,11 +475,10 @@ def _merged_samplers(
 
 def _merged_fit(base: FitSettings, overrides: Mapping, origin: str) -> FitSettings:
     """``base`` with the fields of a ``slam: fit:`` mapping replaced."""
-    known = {f.name for f in dataclasses.fields(FitSettings)}
-    unknown = sorted(set(overrides) - known)
+    unknown = sorted(set(overrides) - FIT_KEYS)
     if unknown:
         raise SettingsError(
-            f"{origin}: unknown key slam.fit.{unknown[0]}; known keys: {sorted(known)}"
+            f"{origin}: unknown key slam.fit.{unknown[0]}; known keys: {sorted(FIT_KEYS)}"
         )
     try:
         return dataclasses.replace(base, **overrides)
