@@ -8,6 +8,7 @@ import resource
 import uuid
 from pathlib import Path
 
+import dynesty.bounding
 import numba
 import numpy as np
 import pytest
@@ -547,3 +548,60 @@ def test_pooling_checks_its_runs():
     pooled = pool_runs([run, capped])
     assert not pooled.converged
     assert "run 2: capped" in pooled.stop_reason
+
+
+def bound_update_failing_at(monkeypatch, failing_call: int) -> dict:
+    """Make dynesty's k-means split of the live points raise the IndexError that collapsed
+    live points gave it in a real run (scipy's kmeans2 on a zero-spread coordinate), once,
+    at its ``failing_call``-th use."""
+    calls = {"n": 0}
+    real = dynesty.bounding._bounding_ellipsoids
+
+    def split(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == failing_call:
+            raise IndexError("Out of bounds on buffer access (axis 0)")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(dynesty.bounding, "_bounding_ellipsoids", split)
+    return calls
+
+
+def test_a_failed_bound_update_stops_the_run_like_a_plateau(monkeypatch):
+    calls = bound_update_failing_at(monkeypatch, 3)
+    lines: list[str] = []
+    alone = run_nested(GaussianLikelihood(), SPACE, PLATEAU, seed=3, log=lines.append)
+    assert calls["n"] == 3  # it stopped where the split failed
+    assert not alone.converged
+    assert alone.stop_reason.startswith("stopped on a likelihood plateau")
+    assert "live points collapsed and dynesty's bound update failed" in alone.stop_reason
+    assert any("WARNING stopped on a likelihood plateau" in line for line in lines)
+    # what it sampled so far is kept, with the final live points
+    assert alone.samples.shape[0] >= PLATEAU.n_live
+    assert np.isfinite(alone.log_evidence)
+    np.testing.assert_allclose(np.exp(alone.log_weights).sum(), 1.0)
+
+    bound_update_failing_at(monkeypatch, 3)
+    settings = dataclasses.replace(PLATEAU, plateau_restarts=1)
+    restarted = run_nested(GaussianLikelihood(), SPACE, settings, seed=3, log=lambda _: None)
+    fresh = run_nested(  # the restart: 20 live points, the next seed, no failure
+        GaussianLikelihood(),
+        SPACE,
+        dataclasses.replace(PLATEAU, n_live=20),
+        seed=4,
+        log=lambda _: None,
+    )
+    assert restarted.converged
+    assert "attempt 2 of 2, live points 10, 20" in restarted.stop_reason
+    np.testing.assert_array_equal(restarted.samples, fresh.samples)
+
+
+def test_an_index_error_from_elsewhere_is_not_taken_for_a_collapse():
+    class Broken(GaussianLikelihood):
+        def __call__(self, x):
+            if self.calls > 30:
+                raise IndexError("a bug in the likelihood")
+            return super().__call__(x)
+
+    with pytest.raises(IndexError, match="a bug in the likelihood"):
+        run_nested(Broken(), SPACE, PLATEAU, seed=3, log=lambda _: None)

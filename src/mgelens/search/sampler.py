@@ -41,6 +41,7 @@ import json
 import logging
 import math
 import time
+import traceback
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import replace
@@ -225,7 +226,8 @@ def _run_dynesty(
 ) -> tuple[bool, str]:
     """Run (or continue) a dynesty sampler; return (converged, stop reason). A static run
     that stopped short of ``dlogz`` without reaching a cap stopped on a likelihood plateau,
-    and its reason starts with :data:`PLATEAU_STOP`."""
+    and its reason starts with :data:`PLATEAU_STOP`; so does one whose bound update failed
+    on collapsed live points (:data:`COLLAPSED_STOP`). Any other exception propagates."""
     maxcall = None if settings.max_calls is None else max(settings.max_calls - calls_so_far, 1)
     common = {
         "print_progress": True,
@@ -237,8 +239,15 @@ def _run_dynesty(
         "maxcall": maxcall,
     }
     iterations_before, calls_before = sampler.it, sampler.ncall
+    collapsed = ""
     with _plateau_warnings_logged_by_mgelens():
-        _run_dynesty_quietly(sampler, settings, common)
+        try:
+            _run_dynesty_quietly(sampler, settings, common)
+        except IndexError as error:
+            if settings.method != "dynesty_static" or not _raised_in_bound_update(error):
+                raise
+            sampler.add_final_live(print_progress=False)
+            collapsed = f" ({COLLAPSED_STOP}: {error})"
     cap = _reached_cap(
         settings, maxcall, sampler.it - iterations_before, sampler.ncall - calls_before
     )
@@ -247,15 +256,31 @@ def _run_dynesty(
             return False, f"stopped at {cap} before the dynamic stopping criterion was reached"
         return True, "dynamic stopping criterion reached"
     delta, dlogz = final_delta_log_evidence(sampler), _static_dlogz(settings)
-    if delta < dlogz:
+    if delta < dlogz and not collapsed:
         return True, f"remaining Δln Z = {delta:.4g} below dlogz = {dlogz:.4g}"
-    stop = f"stopped at {cap}" if cap else PLATEAU_STOP
-    return False, f"{stop} with remaining Δln Z = {delta:.4g} above dlogz = {dlogz:.4g}"
+    stop = f"stopped at {cap}" if cap and not collapsed else PLATEAU_STOP
+    reason = f"{stop} with remaining Δln Z = {delta:.4g} above dlogz = {dlogz:.4g}"
+    return False, reason + collapsed
+
+
+def _raised_in_bound_update(error: BaseException) -> bool:
+    """Whether ``error`` came out of dynesty's ellipsoid bounds (its k-means split of the
+    live points)."""
+    frames = traceback.extract_tb(error.__traceback__)
+    return any(Path(frame.filename).name == "bounding.py" for frame in frames)
 
 
 PLATEAU_STOP = "stopped on a likelihood plateau"
 """Start of the stop reason of a static dynesty run whose live points all reached one ln L
-before its remaining Δln Z fell below ``dlogz``."""
+before its remaining Δln Z fell below ``dlogz``, or collapsed (:data:`COLLAPSED_STOP`)."""
+
+COLLAPSED_STOP = "its live points collapsed and dynesty's bound update failed"
+"""Part of the stop reason of a static dynesty run whose random walks piled its live points
+onto one narrow spike of ln L: identical points give a parameter no spread, and
+dynesty's k-means split of the live points (``bounding._bounding_ellipsoids``, scaled by
+that spread) fails with an IndexError. The run stops there like one on a plateau: its
+samples so far and the final live points are kept, it is not converged, and
+``plateau_restarts`` start it afresh with more live points."""
 
 
 def _reached_cap(settings: SamplerSettings, maxcall: int | None, iterations, calls) -> str:

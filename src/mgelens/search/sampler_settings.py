@@ -60,10 +60,11 @@ discard_exploration
         live point at one ln L, short of ``dlogz`` and of the caps) is started afresh with
         twice the live points and the next seed. Random walks that cannot leave a narrow
         spike of ln L return copies of it until every live point is that copy; more live
-        points make that rarer. Each attempt has its own checkpoint (``<stem>-restart<k>``)
-        and its own caps; the output is the last attempt's (samples, settings, seed), with
-        the calls, runtimes and resumes of all attempts summed and the restarts named in
-        its stop reason.
+        points make that rarer. A run whose bound update fails on such copies counts as
+        one that stopped on a plateau (``sampler.COLLAPSED_STOP``). Each attempt has its
+        own checkpoint (``<stem>-restart<k>``) and its own caps; the output is the last
+        attempt's (samples, settings, seed), with the calls, runtimes and resumes of all
+        attempts summed and the restarts named in its stop reason.
 
     The fields from ``checkpoint_every`` on change only how a run is executed, not its
     result, except that a pool (``n_processes > 1``) changes both samplers' random
