@@ -24,10 +24,8 @@ the mass puts it; local optimisers started from round masses fall into the same 
    (:data:`POLISH_CALLS` evaluations), the mass centre kept within
    :data:`MASS_CENTRE_RANGE` of the light centre; twice, once with θ_E free and once
    held within :data:`ARC_EINSTEIN_RANGE` of the arcs' θ_E, and the higher ln P is kept.
-   Free, Powell's line searches can carry θ_E into a far, worse maximum (3×Sérsic M1:
-   2.20″ at ln P −73,930 from the arcs' 1.27″, where the held polish reaches 1.28″ at
-   −34,238); held, it cannot follow arcs that overestimate θ_E (slacs1032+5322: arcs
-   1.71″, free polish 1.31″, SP 1.04″, Bolton 1.03″).
+   Free, Powell's line searches can carry θ_E into a far, worse maximum; held, the
+   polish cannot follow arcs that overestimate θ_E (both seen: docs/slacs.md).
 
 Each free SP parameter then gets SLaM's passed prior around the polished point
 (:func:`~mgelens.search.priors.passed_prior`, SPEC §8.2: N(value, w) truncated to its
