@@ -26,10 +26,8 @@ import numpy as np
 from common import set_threads
 
 from mgelens.pipeline.run import PhaseLikelihood, build_problem, reference_passive_set
-from mgelens.pipeline.settings import LensSpec, profile_settings
+from mgelens.pipeline.settings import PHASES, LensSpec, profile_settings
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
-
-PHASES = ("sp", "spix1", "spix2", "light", "mass")
 
 
 def unit_draws(kind: str, n_free: int, n_draws: int, rng: np.random.Generator) -> np.ndarray:

@@ -49,10 +49,8 @@ from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.pipeline import models
 from mgelens.pipeline.problem import load_dataset
-from mgelens.pipeline.settings import LensSpec, profile_settings
+from mgelens.pipeline.settings import PHASES, LensSpec, profile_settings
 from mgelens.source.image_mesh import floored_adapt_image, overlay_centres
-
-PHASES = ("sp", "spix1", "spix2", "light", "mass")
 
 STAGES = {
     # stage: [(file, function, caller as (file, function), or None for any caller)]

@@ -24,7 +24,6 @@ Exit code 1 with a one-line error for missing or inconsistent inputs.
 
 import argparse
 import functools
-import json
 import logging
 from pathlib import Path
 
@@ -38,9 +37,10 @@ from mgelens.imaging_input import ImagingError
 from mgelens.mask import circular
 from mgelens.pipeline.records import (
     MODEL_FILE,
+    fit_record_of,
     light_components,
-    mass_model,
-    read_fit_record,
+    masses_from_record,
+    read_result_record,
     recorded_lens,
 )
 from mgelens.quality import lensing_check, quality_statistic
@@ -91,7 +91,8 @@ def read_residual_images(path: Path) -> tuple[np.ndarray, np.ndarray]:
 def run(args: argparse.Namespace) -> int:
     lens = args.lens or args.phase.resolve().parent.name
     try:
-        settings = json.loads((args.phase / RESULT_FILE).read_text())["settings"]
+        result = read_result_record(args.phase)
+        settings = result["settings"]
         spec = recorded_lens(settings)
         lens_dir = args.lens_dir or Path(settings["lens_dir"])
         circle = functools.partial(_circle, float(settings["mask_radius"]), spec.mask_centre)
@@ -101,10 +102,10 @@ def run(args: argparse.Namespace) -> int:
         statistic = quality_statistic(
             nresid, lensed, imaging.noise_map, imaging.mask, imaging.pixel_scale
         )
-        fitted = read_fit_record(args.phase)
+        fitted = fit_record_of(result, args.phase / RESULT_FILE)
         light = light_components(fitted)[0]
         lensing = lensing_check(
-            mass_model(args.phase),
+            masses_from_record(fitted),
             float(settings["mask_radius"]),
             spec.mask_centre,
             light_centre=tuple(light["centre"]),

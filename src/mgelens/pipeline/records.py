@@ -89,12 +89,23 @@ def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dic
     }
 
 
-def read_fit_record(result_folder: str | Path) -> dict:
-    """The ``max_likelihood_fit`` block of a phase folder's ``result.json``."""
+def read_result_record(result_folder: str | Path) -> dict:
+    """A phase folder's whole ``result.json`` (settings, fit record, sampler summary),
+    without its samples."""
     path = Path(result_folder) / RESULT_FILE
     if not path.is_file():
         raise PhaseInputError(f"{path} not found: run the phase first")
-    record = json.loads(path.read_text()).get("max_likelihood_fit")
+    return json.loads(path.read_text())
+
+
+def read_fit_record(result_folder: str | Path) -> dict:
+    """The ``max_likelihood_fit`` block of a phase folder's ``result.json``."""
+    return fit_record_of(read_result_record(result_folder), Path(result_folder) / RESULT_FILE)
+
+
+def fit_record_of(result: dict, path: Path) -> dict:
+    """The ``max_likelihood_fit`` block of a ``result.json`` read from ``path``."""
+    record = result.get("max_likelihood_fit")
     if record is None:
         raise PhaseInputError(f"{path} has no max_likelihood_fit block")
     return record
@@ -133,7 +144,12 @@ def lens_light_profiles(result_folder: str | Path) -> tuple:
 
 def mass_model(result_folder: str | Path) -> tuple:
     """The maximum-likelihood mass profiles (SIE or EPL, ExternalShear) of a phase folder."""
-    return tuple(mass_from_dict(entry) for entry in read_fit_record(result_folder)["mass"])
+    return masses_from_record(read_fit_record(result_folder))
+
+
+def masses_from_record(record: dict) -> tuple:
+    """The mass profiles of a ``max_likelihood_fit`` record."""
+    return tuple(mass_from_dict(entry) for entry in record["mass"])
 
 
 def recorded_settings(settings: dict) -> tuple[SlamSettings, LensSpec]:

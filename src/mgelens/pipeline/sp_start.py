@@ -379,14 +379,11 @@ def polish(
         for axis, c in zip(("centre_x", "centre_y"), centre, strict=True)
     }
     low, high = ARC_EINSTEIN_RANGE
-    held = box | {
-        names.index("mass.einstein_radius"): (
-            low * arcs_einstein_radius,
-            high * arcs_einstein_radius,
-        )
-    }
-    free_x, free_value = _maximise(posterior.boxed(box), x, range(len(names)), None, POLISH_CALLS)
-    held_x, held_value = _maximise(posterior.boxed(held), x, range(len(names)), None, POLISH_CALLS)
+    theta = names.index("mass.einstein_radius")
+    held_box = box | {theta: (low * arcs_einstein_radius, high * arcs_einstein_radius)}
+    every = range(len(names))
+    free_x, free_value = _maximise(posterior.boxed(box), x, every, None, POLISH_CALLS)
+    held_x, held_value = _maximise(posterior.boxed(held_box), x, every, None, POLISH_CALLS)
     posterior.boxed({})
     if held_value > free_value:
         return held_x, held_value, True
