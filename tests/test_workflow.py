@@ -244,13 +244,13 @@ def test_the_paper_mock_comparison_is_nine_rows_each_with_its_lens_light_model(t
     output = result.stdout + result.stderr
     slam = (
         '--slam \'{{"fit": {{"positive_only": {}}}, "lens_light_model": "{}", '
-        '"profile": "quick"}}\''
+        '"profile": "quick", "sp_start": "search"}}\''
     )
     assert "--results results/M1 " in output
     assert slam.format("true", "mge") in output
     assert slam.format("false", "mge") in output
     sersic = '"fit": {"free_source": true, "positive_only": true}, "lens_light_model": "sersic"'
-    assert f'--slam \'{{{sersic}, "profile": "quick"}}\'' in output
+    assert f'--slam \'{{{sersic}, "profile": "quick", "sp_start": "search"}}\'' in output
     whole = snakemake("-n", "--configfile", "config/paper_mocks.yaml", workdir=tmp_path)
     counts = job_counts(whole.stdout + whole.stderr)
     assert counts["simulate_mock"] == 9
