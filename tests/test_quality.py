@@ -257,9 +257,40 @@ def test_a_critical_curve_beside_the_lens_light_is_flagged():
     assert check.flag
     assert "does not enclose the lens-light centre" in check.reason
     assert check.critical_curve_einstein_radius == pytest.approx(0.15, abs=0.02)
-    # a mass 0.3″ from the light still encloses it
-    near = (SIE((0.3, 0.0), 1.0, 0.8, 20.0),)
-    assert not quality.lensing_check(near, 3.0, light_centre=(0.0, 0.0)).flag
+    # a mass 0.3″ from the light still encloses it: flagged for the offset alone
+    near = quality.lensing_check((SIE((0.3, 0.0), 1.0, 0.8, 20.0),), 3.0, light_centre=(0, 0))
+    assert near.flag
+    assert "does not enclose" not in near.reason
+    assert near.centre_offset == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize(("offset", "flagged"), [(0.0, False), (0.09, False), (0.11, True)])
+def test_a_mass_centred_away_from_the_light_is_flagged(offset, flagged):
+    """The threshold is the mass–light distance, in any direction."""
+    light = (0.02, -0.03)
+    direction = np.deg2rad(130.0)
+    centre = (light[0] + offset * np.cos(direction), light[1] + offset * np.sin(direction))
+    mass = (EPL(centre, 1.1, 0.8, 30.0, 2.0), ExternalShear(0.02, 0.01))
+    check = quality.lensing_check(mass, 3.0, light_centre=light)
+    assert check.flag is flagged
+    assert check.centre_offset == pytest.approx(offset, abs=1e-12)
+    assert check.critical_curve_einstein_radius == pytest.approx(1.1, rel=0.05)
+    if flagged:
+        assert f"is {offset:.2f}″ from the lens-light centre" in check.reason
+    # without a light centre there is no offset to judge
+    assert quality.lensing_check(mass, 3.0).centre_offset is None
+
+
+def test_slacs1250_mass_offset_with_aligned_shear_is_flagged():
+    """slacs1250+0523's MASS (docs/slacs.md): centre 0.26″ from the light, q 0.60 and an
+    aligned shear of 0.12; its θ_E agrees with Bolton's, so only the offset shows it."""
+    shear_angle = np.deg2rad(2 * 133.0)
+    mass = (EPL((0.12, 0.24), 1.175, 0.60, 133.0, 2.02),
+            ExternalShear(0.12 * np.cos(shear_angle), 0.12 * np.sin(shear_angle)))  # fmt: skip
+    assert not quality.lensing_check(mass, 3.0).flag
+    check = quality.lensing_check(mass, 3.0, light_centre=(0.0, 0.0))
+    assert check.flag
+    assert check.centre_offset == pytest.approx(0.268, abs=0.001)
 
 
 def test_encloses_follows_the_even_odd_rule():

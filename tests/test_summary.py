@@ -150,7 +150,8 @@ def write_lens_folder(root, lens, theta, q, slope, names, measured, flag):
     quality = {"measured": measured, "flag": flag, "significance": 2.0 if measured else None,
                "peak": 7.0 if flag else 3.0, "worst_x": 1.0, "worst_y": -0.5,
                "lensing": {"critical_curve_einstein_radius": 1.0 if measured else None,
-                           "flag": not measured, "reason": ""}}  # fmt: skip
+                           "flag": not measured, "reason": "",
+                           "centre_offset": 0.02 if measured else None}}  # fmt: skip
     write_json(folder / "quality.json", quality)
     y, x = (np.indices(SHAPE) - 20) * PIXEL
     mask = np.hypot(x, y) > RADIUS
@@ -224,6 +225,8 @@ def test_lens_table_converts_and_compares(lens_folders, reference):
     assert mock["light_model"] == "3xSersic"
     assert pd.isna(mock["quality_flag"])
     assert (sie["lensing_flag"], epl["lensing_flag"], mock["lensing_flag"]) == (False, False, True)
+    assert sie["mass_light_offset"] == 0.02
+    assert math.isnan(mock["mass_light_offset"])
     assert mock[["bolton_b_sie", "shajib_theta_e", "quality_statistic"]].isna().all()
 
 

@@ -43,7 +43,11 @@ needle-thin one, whose circle-equivalent radius √(area/π) is below
 :data:`MIN_CURVE_ROUNDNESS` of its half length (an elliptical curve of axis ratio q_c has
 the ratio √q_c: 0.45 for an SIE of q = 0.2), or one that does not enclose the lens-light
 centre (a small curve of a mass beside the galaxy). All three are failure modes of SP on
-real data (docs/slacs.md, "First real lens" and "slacs1250+0523").
+real data (docs/slacs.md, "First real lens" and "slacs1250+0523"). Also flagged: a mass
+centre more than :data:`MAX_CENTRE_OFFSET` from the lens-light centre. Such a mass still
+lenses, but an isolated elliptical's mass and light share a centre to within a pixel; an
+offset mass traded against an aligned external shear reproduces θ_E while its centre, q
+and shear are not physical (slacs1250+0523, docs/slacs.md).
 """
 
 import math
@@ -70,6 +74,9 @@ BLOCK_OUTLIER = 4.0
 MIN_CURVE_ROUNDNESS = 0.25
 """Smallest √(area/π) / half-length of a tangential critical curve (a curve axis ratio of
 about 0.06) that :func:`lensing_check` accepts."""
+MAX_CENTRE_OFFSET = 0.1
+"""Largest mass–light centre distance (arcsec, two HST ACS pixels) that
+:func:`lensing_check` accepts."""
 CHI2_1_MEDIAN = 0.454936423119572
 """Median of the χ² distribution with one degree of freedom."""
 
@@ -299,14 +306,17 @@ class LensingCheck:
     """Whether a mass model multiply images inside the fit circle (module docstring).
 
     ``critical_curve_einstein_radius`` is √(area/π) of the tangential critical curve in
-    arcsec (``None`` without a closed curve in the circle); ``flag`` is True when there is
-    no such curve, it is needle-thin or it leaves the lens-light centre outside, with the
-    ``reason``.
+    arcsec (``None`` without a closed curve in the circle); ``centre_offset`` is the
+    distance in arcsec from the first mass profile's centre to the lens-light centre
+    (``None`` when no light centre was given); ``flag`` is True when there is no such
+    curve, it is needle-thin, it leaves the lens-light centre outside or the offset
+    exceeds :data:`MAX_CENTRE_OFFSET`, with the ``reason``.
     """
 
     critical_curve_einstein_radius: float | None
     flag: bool
     reason: str
+    centre_offset: float | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -332,14 +342,18 @@ def lensing_check(
 ) -> LensingCheck:
     """Flag a mass model without a closed tangential critical curve inside the circle of
     ``mask_radius`` (arcsec) around ``mask_centre``, with a needle-thin one, or (given the
-    lens-light centre ``light_centre``, arcsec) with one that does not enclose it (SPEC §3.4
-    grid of ``grid_spacing``; module docstring)."""
+    lens-light centre ``light_centre``, arcsec) with one that does not enclose it or a first
+    mass profile centred more than :data:`MAX_CENTRE_OFFSET` from it (SPEC §3.4 grid of
+    ``grid_spacing``; module docstring)."""
+    offset = None
+    if light_centre is not None:
+        offset = math.dist(mass[0].centre, light_centre)
     half_width = abs(mask_centre[0]) + abs(mask_centre[1]) + mask_radius
     try:
         x, y = tangential_critical_curve(mass, grid_spacing, half_width)
     except ValueError:
         return LensingCheck(
-            None, True, f"no closed tangential critical curve within {half_width:.2f}″"
+            None, True, f"no closed tangential critical curve within {half_width:.2f}″", offset
         )
     outside = np.hypot(x - mask_centre[0], y - mask_centre[1]).max()
     if outside > mask_radius:
@@ -348,6 +362,7 @@ def lensing_check(
             True,
             f"the tangential critical curve reaches {outside:.2f}″ from the mask centre, "
             f"beyond the {mask_radius:g}″ fit circle",
+            offset,
         )
     radius = circle_equivalent_radius(x, y)
     if light_centre is not None and not encloses(x, y, light_centre):
@@ -357,6 +372,7 @@ def lensing_check(
             f"the tangential critical curve (√(area/π) = {radius:.2f}″, centred near "
             f"({np.mean(x):.2f}, {np.mean(y):.2f})″) does not enclose the lens-light centre "
             f"({light_centre[0]:.2f}, {light_centre[1]:.2f})″",
+            offset,
         )
     half_length = 0.5 * float(np.max(np.hypot(x[:, None] - x, y[:, None] - y)))
     if radius < MIN_CURVE_ROUNDNESS * half_length:
@@ -365,5 +381,15 @@ def lensing_check(
             True,
             f"needle-thin tangential critical curve: √(area/π) = {radius:.2f}″ against a "
             f"half length of {half_length:.2f}″",
+            offset,
         )
-    return LensingCheck(radius, False, "")
+    if offset is not None and offset > MAX_CENTRE_OFFSET:
+        return LensingCheck(
+            radius,
+            True,
+            f"the mass centre ({mass[0].centre[0]:.2f}, {mass[0].centre[1]:.2f})″ is "
+            f"{offset:.2f}″ from the lens-light centre ({light_centre[0]:.2f}, "
+            f"{light_centre[1]:.2f})″, beyond {MAX_CENTRE_OFFSET:g}″",
+            offset,
+        )
+    return LensingCheck(radius, False, "", offset)

@@ -56,7 +56,10 @@ quality_peak                    largest block |z| / τ
 quality_flag                    K or the peak above its threshold (empty: not measured)
 lensing_flag                    the MASS model has no closed, galaxy-like tangential critical
                                 curve around the lens light in the fit circle
-                                (:func:`mgelens.quality.lensing_check`)
+                                (:func:`mgelens.quality.lensing_check`), or its centre lies
+                                more than 0.1″ from the lens light's
+mass_light_offset               distance of the MASS model's mass centre from the lens-light
+                                centre (arcsec)
 ==============================  ==============================================================
 
 Published columns are NaN for lenses absent from a table, and all NaN (with a logged
@@ -116,6 +119,7 @@ FIT_COLUMNS = (
     "quality_peak",
     "quality_flag",
     "lensing_flag",
+    "mass_light_offset",
 )  # fmt: skip
 """Columns :func:`lens_table` adds to :data:`TABLE_COLUMNS`."""
 QUALITY_FILE = "quality.json"
@@ -244,6 +248,7 @@ def _fit_row(lens_folder: Path) -> dict:
         row["quality_peak"] = _number(quality["peak"])
         row["quality_flag"] = bool(quality["flag"]) if quality["measured"] else pd.NA
         row["lensing_flag"] = bool(quality["lensing"]["flag"])
+        row["mass_light_offset"] = _number(quality["lensing"]["centre_offset"])
     except FileNotFoundError as exc:
         raise ValueError(f"{lens_folder}: {exc.filename} not found") from exc
     except PhaseInputError as exc:
