@@ -113,7 +113,8 @@ def test_search_finds_the_mocks_mass_from_nothing_but_the_data(mock_problem, moc
     assert abs(values["mass.centre_x"] - light[0]) <= sp_start.MASS_CENTRE_RANGE
     assert abs(values["mass.centre_y"] - light[1]) <= sp_start.MASS_CENTRE_RANGE
     assert mock_start.n_arc_pixels >= sp_start.MIN_ARC_PIXELS
-    assert mock_start.n_calls <= sp_start.LIGHT_CALLS + 2 * sp_start.POLISH_CALLS + 50
+    # two polishes from each of two starting points
+    assert mock_start.n_calls <= sp_start.LIGHT_CALLS + 4 * sp_start.POLISH_CALLS + 50
     # the polished point beats the anchor-prior medians and the arcs' start
     space = mock_problem.space
     likelihood = run.PhaseLikelihood(mock_problem.dataset, space, mock_problem.model)
@@ -298,3 +299,36 @@ def test_dataset_pixel_centres_are_the_unmasked_pixels(mock_problem):
     x, y = dataset.pixel_centres
     assert x.shape == dataset.data.shape
     assert np.all(np.hypot(x, y) <= MASK_RADIUS + PIXEL)
+
+
+def test_the_light_shaped_start_has_the_lights_ellipticity_and_no_shear():
+    names = ["lens_light.set_0.ell_comps_1", "lens_light.set_0.ell_comps_2",
+             "mass.ell_comps_1", "mass.ell_comps_2", "shear.gamma_1", "shear.gamma_2",
+             "lens_light.set_1.ell_comps_1"]  # fmt: skip
+    start = dict(zip(names, [0.07, 0.12, 0.37, -0.2, 0.05, -0.21, 0.3], strict=True))
+    shaped = sp_start.light_shaped(start, names)
+    assert shaped == start | {"mass.ell_comps_1": 0.07, "mass.ell_comps_2": 0.12,
+                              "shear.gamma_1": 0.0, "shear.gamma_2": 0.0}  # fmt: skip
+    assert start["mass.ell_comps_1"] == 0.37  # the arcs' start is not changed
+
+
+@pytest.mark.parametrize(("values", "chosen"), [((-82720.8, -75084.4), 1), ((-5.0, -5.0), 0)])
+def test_the_start_with_the_higher_polished_posterior_wins(monkeypatch, values, chosen):
+    """M3's case (docs/paper_mocks.md): from the arcs' SIE + shear the polish reached ln P
+    −82,720.8 in an elongated mass with a strong shear, from the light-shaped mass
+    −75,084.4; a tie keeps the arcs' start."""
+    starts = [np.array([0.0, 0.0, 1.1]), np.array([0.0, 0.0, 1.2])]
+
+    def polish(posterior, x, names, centre, arcs_einstein_radius):
+        index = round(10 * (x[2] - 1.1))
+        return x + 0.01, values[index], index == 0
+
+    monkeypatch.setattr(sp_start, "polish", polish)
+    posterior = sp_start._Posterior(lambda x: 0.0, MASS_SPACE)
+    x, value, held, index = sp_start.polish_starts(
+        posterior, starts, MASS_SPACE.free_names, (0.0, 0.0), 1.1
+    )
+    assert index == chosen
+    assert value == values[chosen]
+    assert held is (chosen == 0)
+    assert x == pytest.approx(starts[chosen] + 0.01)

@@ -25,7 +25,13 @@ the mass puts it; local optimisers started from round masses fall into the same 
    :data:`MASS_CENTRE_RANGE` of the light centre; twice, once with θ_E free and once
    held within :data:`ARC_EINSTEIN_RANGE` of the arcs' θ_E, and the higher ln P is kept.
    Free, Powell's line searches can carry θ_E into a far, worse maximum; held, the
-   polish cannot follow arcs that overestimate θ_E (both seen: docs/slacs.md).
+   polish cannot follow arcs that overestimate θ_E (both seen: docs/slacs.md). Both
+   polishes run from two points: the arcs' SIE + shear, and the same θ_E with the mass
+   shaped as the fitted lens light (its first component's ell_comps) and no shear; the
+   highest ln P of the four wins. Where the lens light dominates SP's likelihood, the
+   arcs' point alone led into an elongated mass traded against a strong shear, while
+   the light-shaped point reaches a far higher maximum near the true mass
+   (docs/paper_mocks.md, M3).
 
 Each free SP parameter then gets SLaM's passed prior around the polished point
 (:func:`~mgelens.search.priors.passed_prior`, SPEC §8.2: N(value, w) truncated to its
@@ -140,6 +146,9 @@ class SPStart:
     held_einstein_radius : bool
         Whether the polish that won held θ_E near the arcs' (step 4; false in records
         written before there were two).
+    light_shaped_mass : bool
+        Whether the polish that won began from the light-shaped mass (step 4; false in
+        records written before there were two starting points).
     """
 
     values: dict | None
@@ -150,6 +159,7 @@ class SPStart:
     n_calls: int
     seconds: float
     held_einstein_radius: bool = False
+    light_shaped_mass: bool = False
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -344,23 +354,60 @@ def search(
         return SPStart(None, None, light_value, None, len(ax), posterior.calls,
                        time.perf_counter() - began)  # fmt: skip
     arcs = arc_mass(ax, ay, weight, centre, radius)
-    x = space.vector(_arc_start(values, arcs, centre))
-    x, value, held = polish(posterior, x, names, centre, arcs.einstein_radius)
+    arc_start = _arc_start(values, arcs, centre)
+    starts = [space.vector(arc_start), space.vector(light_shaped(arc_start, names))]
+    x, value, held, chosen = polish_starts(posterior, starts, names, centre, arcs.einstein_radius)
     found = dict(zip(names, x.tolist(), strict=True))
     logger.info(
         "SP start: arcs θ_E %.3f″ (sphere %.3f″), source (%.3f, %.3f)″; polished ln P %.1f "
-        "(θ_E %s), θ_E %.3f″, %d calls",
+        "(from the %s mass, θ_E %s), θ_E %.3f″, %d calls",
         arcs.einstein_radius,
         arcs.sphere_einstein_radius,
         arcs.source_x,
         arcs.source_y,
         value,
+        "light-shaped" if chosen == 1 else "arcs'",
         "held near the arcs'" if held else "free",
         found["mass.einstein_radius"],
         posterior.calls,
     )
     return SPStart(found, value, light_value, arcs, len(ax), posterior.calls,
-                   time.perf_counter() - began, held)  # fmt: skip
+                   time.perf_counter() - began, held, chosen == 1)  # fmt: skip
+
+
+def light_shaped(start: dict, names: Sequence[str]) -> dict:
+    """``start`` with the mass shaped as the lens light: its ell_comps those of the first
+    lens-light component among ``names``, and no shear (step 4)."""
+    light = next(
+        name.removesuffix(".ell_comps_1")
+        for name in names
+        if name.startswith(f"{models.LENS_LIGHT}.") and name.endswith(".ell_comps_1")
+    )
+    return {
+        **start,
+        "mass.ell_comps_1": start[f"{light}.ell_comps_1"],
+        "mass.ell_comps_2": start[f"{light}.ell_comps_2"],
+        "shear.gamma_1": 0.0,
+        "shear.gamma_2": 0.0,
+    }
+
+
+def polish_starts(
+    posterior: _Posterior,
+    starts: Sequence[np.ndarray],
+    names: Sequence[str],
+    centre: tuple[float, float],
+    arcs_einstein_radius: float,
+) -> tuple[np.ndarray, float, bool, int]:
+    """:func:`polish` from each of ``starts``; the highest ln P wins (a tie goes to the
+    earlier start). Returns the point, its ln P, whether the held polish won and the
+    index of the winning start."""
+    best = None
+    for index, start in enumerate(starts):
+        x, value, held = polish(posterior, start, names, centre, arcs_einstein_radius)
+        if best is None or value > best[1]:
+            best = (x, value, held, index)
+    return best
 
 
 def polish(
