@@ -4,9 +4,11 @@ Snakemake runs as a subprocess from the repository root with ``-d <tmp dir>``, s
 is written into the repository.
 """
 
+import functools
 import json
 import re
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -15,12 +17,7 @@ import yaml
 from astropy.io import fits
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
-from workflow_run import (
-    BACKGROUND_LENS,
-    CHAIN_TIMEOUT,
-    ROOT,
-    snakemake,
-)
+from workflow_run import CHAIN_TIMEOUT, ROOT, snakemake
 
 from mgelens import cli, mock_lenses
 from mgelens import simulate as sim
@@ -609,45 +606,46 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
 # The whole SLaM chain of one paper mock with the default (quick) configuration:
 # `snakemake results/<mock>/recovery.json` runs exactly the jobs that `snakemake -j2`
 # runs for that lens (mock, SP, SPix1, SPix2, LIGHT, MASS, recovery), and its record is
-# held to SPEC §11's criteria. M1's chain runs with the suite: it starts before the first
-# test (tests/conftest.py, `background_chain`), overlaps the other tests, and runs
-# SPix2, LIGHT and MASS on 2 processes. M2's and M3's take 14-22 min each on one core,
-# beyond the suite's budget, so they carry the `recovery` marker and run only with
-# `python -m pytest --recovery -m recovery`.
+# held to SPEC §11's criteria. Each chain takes 15-25 minutes on one core, M1's alone
+# more than the suite's 15-minute budget on a slower host (README "Run it"), so they
+# carry the `recovery` marker and run only with `python -m pytest --recovery -m recovery`.
+CHAIN_LENSES = [pytest.param(lens, marks=pytest.mark.recovery) for lens in ("M1", "M2", "M3")]
 
 
-@pytest.fixture(
-    scope="module",
-    params=[
-        pytest.param(BACKGROUND_LENS, marks=pytest.mark.slow),
-        pytest.param("M2", marks=pytest.mark.recovery),
-        pytest.param("M3", marks=pytest.mark.recovery),
-    ],
-)
-def chain_recovery(request, background_chain, tmp_path_factory) -> dict:
-    """The recovery record (``mgelens recovery``) of one mock's quick-profile chain."""
-    lens = request.param
-    target = f"results/{lens}/recovery.json"
-    if lens == BACKGROUND_LENS:
-        workdir = background_chain.wait()
-    else:
-        workdir = tmp_path_factory.mktemp(lens)
+@pytest.fixture(scope="session")
+def run_chain(tmp_path_factory):
+    """``run_chain(lens)``: the working directory of ``lens``'s whole chain, run once."""
+
+    @functools.cache
+    def run(lens: str) -> Path:
+        workdir = tmp_path_factory.mktemp(f"{lens}-chain")
+        target = f"results/{lens}/recovery.json"
         result = snakemake("-c1", target, workdir=workdir, timeout=CHAIN_TIMEOUT)
         assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    return json.loads((workdir / target).read_text())
+        return workdir
+
+    return run
 
 
-@pytest.mark.slow
-def test_chain_sp_lands_in_the_true_mass_basin_of_m1(background_chain):
+@pytest.fixture(scope="module", params=CHAIN_LENSES)
+def chain_recovery(request, run_chain) -> dict:
+    """The recovery record (``mgelens recovery``) of one mock's quick-profile chain."""
+    record = run_chain(request.param) / "results" / request.param / "recovery.json"
+    return json.loads(record.read_text())
+
+
+@pytest.mark.recovery
+def test_chain_sp_lands_in_the_true_mass_basin_of_m1(run_chain):
     """SP hands its maximum-likelihood SIE + shear on to every later phase (priors,
     positions penalty, fixed lens-light geometry), so it must find the true basin.
 
     The truth is an EPL (γ = 2.1, q = 0.8, φ = 45°, centre (0.013, −0.070)) without
-    shear. With 36 live points the quick SP stopped in a false mode (q 0.65, shear 0.067,
-    centre y −0.004, max ln L −39,655); with the profile's 60 it reached q 0.80, shear
-    0.006, centre (0.014, −0.074) and θ_E 1.187 (max ln L −7,019).
+    shear. With 36 live points the quick SP from the anchor's priors stopped in a false
+    mode (q 0.65, shear 0.067, centre y −0.004, max ln L −39,655); with the profile's 60
+    it reached q 0.80, shear 0.006, centre (0.014, −0.074) and θ_E 1.187 (max ln L
+    −7,019).
     """
-    results = background_chain.wait() / "results" / "M1"
+    results = run_chain("M1") / "results" / "M1"
     sp = json.loads((results / "sp" / "result.json").read_text())
     truth = true_mass_parameters(json.loads((results / "mock" / "truth.json").read_text()))
     best = sp["max_likelihood"]

@@ -9,13 +9,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 """The repository root (holds the top-level Snakefile)."""
 
-BACKGROUND_LENS = "M1"
-"""The paper mock whose whole quick-profile chain runs with the normal suite, in the
-background from the first test (``conftest.background_chain``)."""
-
 CHAIN_TIMEOUT = 3600
-"""Seconds one mock's whole SLaM chain may take (M3, the slowest, takes about 22 min on
-one core)."""
+"""Seconds one mock's whole SLaM chain may take (each of M1-M3 takes 15-25 min on one
+core, with the host)."""
 
 
 def snakemake_command(*args: str, workdir: Path) -> list[str]:
