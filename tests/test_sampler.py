@@ -17,7 +17,12 @@ from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
 from mgelens.search.posterior import SamplerOutput, pool_runs
 from mgelens.search.priors import Uniform
-from mgelens.search.sampler import CheckpointMismatchError, resolve_sample_method, run_nested
+from mgelens.search.sampler import (
+    CheckpointMismatchError,
+    nautilus_live_points,
+    resolve_sample_method,
+    run_nested,
+)
 from mgelens.search.sampler_settings import SamplerSettings
 from mgelens.threads import blas_threads
 
@@ -343,6 +348,21 @@ def test_nautilus_recovers_evidence():
     assert output.n_calls == likelihood.calls
     assert output.n_rejected == likelihood.rejected > 0
     assert_recovers_gaussian(output, tolerance=0.15)
+
+
+def test_nautilus_keeps_three_live_points_per_free_parameter():
+    """Fewer live points than 3 per parameter are raised to that, logged and recorded;
+    the quick MASS's 30 for its 8 parameters stand, and the 3×Sérsic MASS's 22 get 66."""
+    settings = SamplerSettings(
+        method="nautilus", n_live=4, n_networks=1, n_eff=100, progress_every=1e9
+    )
+    lines: list[str] = []
+    output = run_nested(GaussianLikelihood(), SPACE, settings, seed=4, log=lines.append)
+    assert output.settings["n_live"] == 6
+    assert lines[0] == "nautilus: n_live raised from 4 to 6, 3 per free parameter (2)"
+    assert abs(output.log_evidence - LOG_Z) < 0.5
+    assert nautilus_live_points(30, 8) == 30
+    assert nautilus_live_points(30, 22) == 66
 
 
 def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):

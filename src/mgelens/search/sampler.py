@@ -18,6 +18,9 @@
   successful run: calling :func:`run_nested` again returns the stored run without sampling.
   Callers delete it once their result files are written if they want the space back.
   Nautilus checkpoints to ``<checkpoint stem>.h5`` (HDF5, no code), with the same sidecar.
+* **Enough live points for nautilus**: a nautilus run keeps at least
+  :data:`NAUTILUS_LIVE_PER_PARAMETER` live points per free parameter; a smaller ``n_live``
+  is raised to that, with a log line, and the output records the number used.
 * **Quiet progress**: no progress bar; one line every ``progress_every`` seconds through
   ``log`` (default: the ``mgelens.search`` logger at INFO level).
 * **Parallel likelihoods**: ``n_processes > 1`` runs a ``multiprocessing`` pool ("spawn"
@@ -421,6 +424,20 @@ def _nautilus_checkpoint(checkpoint_path: Path | None) -> Path | None:
     return None if checkpoint_path is None else checkpoint_path.with_suffix(".h5")
 
 
+NAUTILUS_LIVE_PER_PARAMETER = 3
+"""Fewest nautilus live points per free parameter. Below it nautilus's bounds fail and its
+run is wrong without saying so: on a narrow 22-dimensional Gaussian, 30 live points
+(the quick profile's MASS, meant for its 8 parameters, given the 3×Sérsic chain's 22)
+stopped at 60,000 calls with ln Z off by 100; 60 and 90 live points came within 4 and
+1 (docs/slam.md, "Live points per parameter")."""
+
+
+def nautilus_live_points(n_live: int, n_free: int) -> int:
+    """Live points of a nautilus run of ``n_free`` parameters asked for ``n_live``: at
+    least :data:`NAUTILUS_LIVE_PER_PARAMETER` per parameter."""
+    return max(n_live, NAUTILUS_LIVE_PER_PARAMETER * n_free)
+
+
 NAUTILUS_MIN_PROGRESS_INTERVAL = 1.0
 """Shortest time between nautilus progress lines, seconds: nautilus starts no likelihood
 call once its timeout has passed, so a zero timeout would never advance."""
@@ -444,6 +461,13 @@ def _sample_nautilus(
     import nautilus  # imported here: it loads its neural-network stack on import
 
     space = evaluation.space
+    n_live = nautilus_live_points(settings.n_live, space.n_free)
+    if n_live != settings.n_live:
+        log(
+            f"nautilus: n_live raised from {settings.n_live} to {n_live}, "
+            f"{NAUTILUS_LIVE_PER_PARAMETER} per free parameter ({space.n_free})"
+        )
+        settings = replace(settings, n_live=n_live)
     filepath = _nautilus_checkpoint(checkpoint_path)
     if filepath is not None:
         fingerprint = _fingerprint(space, settings, seed)
