@@ -426,10 +426,8 @@ def _nautilus_checkpoint(checkpoint_path: Path | None) -> Path | None:
 
 NAUTILUS_LIVE_PER_PARAMETER = 3
 """Fewest nautilus live points per free parameter. Below it nautilus's bounds fail and its
-run is wrong without saying so: on a narrow 22-dimensional Gaussian, 30 live points
-(the quick profile's MASS, meant for its 8 parameters, given the 3×Sérsic chain's 22)
-stopped at 60,000 calls with ln Z off by 100; 60 and 90 live points came within 4 and
-1 (docs/slam.md, "Live points per parameter")."""
+run is wrong without saying so, as the quick profile's 30 were for the 3×Sérsic MASS's
+22 parameters (measured in docs/slam.md, "Live points per parameter")."""
 
 
 def nautilus_live_points(n_live: int, n_free: int) -> int:
