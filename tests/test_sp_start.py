@@ -332,3 +332,33 @@ def test_the_start_with_the_higher_polished_posterior_wins(monkeypatch, values, 
     assert value == values[chosen]
     assert held is (chosen == 0)
     assert x == pytest.approx(starts[chosen] + 0.01)
+
+
+def test_pn_mge_searches_its_start_with_the_non_negative_solve(mock_folder, tmp_path, monkeypatch):
+    """With ``positive_only: false`` (pn-MGE) the start's likelihood is the non-negative
+    one, point for point (docs/paper_mocks.md, M3 pn-MGE), while SP samples pn-MGE."""
+    pn = sp_phase.problem(
+        mock_folder, mock_folder, settings_from_mapping({"fit": {"positive_only": False}}), LENS
+    )
+    nn = sp_phase.problem(mock_folder, mock_folder, settings_from_mapping({}), LENS)
+    assert sp_start.search_dataset(nn.dataset) is nn.dataset
+    seen = {}
+
+    def search(dataset, space, model, likelihood, radius):
+        seen.update(dataset=dataset, likelihood=likelihood)
+        return sp_start.SPStart(None, None, 0.0, None, 0, 0, 0.0)
+
+    monkeypatch.setattr(sp_start, "search", search)
+    started = run.started_sp(pn, tmp_path, {})
+    assert started.dataset is pn.dataset
+    assert not started.dataset.settings.positive_only
+    assert seen["dataset"].settings.positive_only
+    assert seen["dataset"].light_grid is pn.dataset.light_grid
+    truth = mock_lenses.paper_mock("M1").mass[0]
+    x = pn.space.prior_transform(np.full(pn.space.n_free, 0.5))
+    x[pn.space.free_names.index("mass.einstein_radius")] = truth.einstein_radius
+    nn_value = run.PhaseLikelihood(nn.dataset, nn.space, nn.model)(x)
+    pn_value = run.PhaseLikelihood(pn.dataset, pn.space, pn.model)(x)
+    assert seen["likelihood"](x) == pytest.approx(nn_value, rel=1e-12)
+    # the unconstrained solve fits at least as well: a different likelihood
+    assert pn_value > nn_value + 1.0

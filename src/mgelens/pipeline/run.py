@@ -525,14 +525,16 @@ def run_phase(
 def started_sp(problem: PhaseProblem, folder: Path, checksums: dict) -> PhaseProblem:
     """SP's problem with its priors passed from the arcs' start (:mod:`sp_start`), read
     from ``folder/start.json`` when it was found for the same inputs (``checksums``, of
-    ``problem.inputs``) and settings."""
+    ``problem.inputs``) and settings. The search solves non-negatively whatever SP's
+    ``positive_only`` (:func:`sp_start.search_dataset`)."""
     fingerprint = problem_fingerprint(problem, checksums)
-    likelihood = PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    dataset = sp_start.search_dataset(problem.dataset)
+    likelihood = PhaseLikelihood(dataset, problem.space, problem.model)
     start = sp_start.read_or_search(
         folder,
         fingerprint,
         lambda: sp_start.search(
-            problem.dataset,
+            dataset,
             problem.space,
             problem.model,
             likelihood,

@@ -33,6 +33,13 @@ the mass puts it; local optimisers started from round masses fall into the same 
    the light-shaped point reaches a far higher maximum near the true mass
    (docs/paper_mocks.md, M3).
 
+Every step runs with the non-negative linear solve (:func:`search_dataset`), also where
+SP itself samples the unconstrained one (pn-MGE, ``positive_only: false``): there the
+MGE's negative Gaussians can take up the arcs, so a mass that sends the source elsewhere
+costs little and SP's likelihood does not single out the lens mass; on M3 its polish
+wandered to θ_E 2.26″ for a true 1.1″ (docs/paper_mocks.md). The non-negative lens light
+cannot draw the arcs, and its maximum is near the true mass.
+
 Each free SP parameter then gets SLaM's passed prior around the polished point
 (:func:`~mgelens.search.priors.passed_prior`, SPEC §8.2: N(value, w) truncated to its
 limits, w the width modifier: centres 0.05″, ell_comps 0.2, θ_E 25 %, shear 0.05). With
@@ -45,7 +52,7 @@ import json
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -318,6 +325,20 @@ def _arc_start(values: dict, arcs: ArcMass, centre: tuple[float, float]) -> dict
         f"{models.SOURCE}.set_0.centre_x": arcs.source_x,
         f"{models.SOURCE}.set_0.centre_y": arcs.source_y,
     }
+
+
+def search_dataset(dataset: FitDataset) -> FitDataset:
+    """The dataset the start searches on: ``dataset`` itself where its lens light is solved
+    non-negatively (``positive_only`` true), else ``dataset`` with the non-negative solve
+    of every linear unknown. The grids are shared, the caches are not."""
+    if dataset.settings.positive_only:
+        return dataset
+    return replace(
+        dataset,
+        settings=replace(dataset.settings, positive_only=True),
+        _columns_cache={},
+        _source_cache={},
+    )
 
 
 def search(
