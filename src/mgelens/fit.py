@@ -106,6 +106,20 @@ class FitDataset:
         )
         return cls(imaging, mask, settings, light_grid, source_grid, border)
 
+    def non_negative(self) -> "FitDataset":
+        """This dataset with the non-negative solve of every linear unknown
+        (``positive_only`` true): itself if it solves so already, else a copy sharing the
+        grids (which the solve does not change) with empty caches (whose entries do
+        depend on it)."""
+        if self.settings.positive_only:
+            return self
+        return replace(
+            self,
+            settings=replace(self.settings, positive_only=True),
+            _columns_cache={},
+            _source_cache={},
+        )
+
     @cached_property
     def data(self) -> np.ndarray:
         return self.imaging.data[~self.mask]

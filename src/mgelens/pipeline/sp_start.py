@@ -52,7 +52,7 @@ import json
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -328,17 +328,9 @@ def _arc_start(values: dict, arcs: ArcMass, centre: tuple[float, float]) -> dict
 
 
 def search_dataset(dataset: FitDataset) -> FitDataset:
-    """The dataset the start searches on: ``dataset`` itself where its lens light is solved
-    non-negatively (``positive_only`` true), else ``dataset`` with the non-negative solve
-    of every linear unknown. The grids are shared, the caches are not."""
-    if dataset.settings.positive_only:
-        return dataset
-    return replace(
-        dataset,
-        settings=replace(dataset.settings, positive_only=True),
-        _columns_cache={},
-        _source_cache={},
-    )
+    """The dataset the start searches on: ``dataset`` with the non-negative solve
+    (:meth:`FitDataset.non_negative`), whatever SP samples (see the module)."""
+    return dataset.non_negative()
 
 
 def search(
