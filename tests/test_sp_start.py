@@ -200,8 +200,8 @@ def test_sp_phase_samples_the_started_priors_and_reuses_its_start(
     assert not (tmp_path / "prior" / "sp" / sp_start.START_FILE).exists()
 
 
-def test_the_real_samples_start_sp_from_the_search_and_the_profiles_from_the_priors():
-    assert profile_settings("quick").sp_start == "prior"
+def test_the_quick_profile_and_the_real_samples_start_sp_from_the_search():
+    assert profile_settings("quick").sp_start == "search"
     assert profile_settings("paper").sp_start == "prior"
     for config in ("slacs.yaml", "paper.yaml"):
         content = yaml.safe_load((ROOT / "config" / config).read_text())

@@ -117,11 +117,13 @@ class SlamSettings:
     prior_passing : {"paper", "2024"}
         Prior-passing rule (SPEC §8.2).
     sp_start : {"prior", "search"}
-        SP's priors: the anchor's (``prior``, SPEC §3, §8.1; both profiles), or SLaM's
+        SP's priors: the anchor's (``prior``, SPEC §3, §8.1; the paper profile), or SLaM's
         passed priors around a maximum-a-posteriori point found from the lensed arcs
-        before sampling (``search``, :mod:`mgelens.pipeline.sp_start`; set by the real
-        samples' configs ``config/slacs.yaml`` and ``config/paper.yaml``), without which
-        SP settled in a degenerate mass on real imaging (docs/slacs.md).
+        before sampling (``search``, :mod:`mgelens.pipeline.sp_start`; the quick profile,
+        and set by the real samples' configs ``config/slacs.yaml`` and
+        ``config/paper.yaml`` for either profile). Without it SP settled in a degenerate
+        mass on real imaging (docs/slacs.md), and on M1–M3 it needs fewer calls
+        (docs/slam.md, "SP's start in the quick profile").
     positions_penalty : bool
         Require the multiple images of SP's source centre to re-converge in the source
         plane in SPix1 and MASS (SPEC §12.21; off in the paper profile, on in quick, where
@@ -352,6 +354,7 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
             profile="quick",
             positions_penalty=True,
             adaptive_signals="weighted",
+            sp_start="search",
             mass_meshes=2,
             source_pixels=500,
             overlay_shape=(24, 24),
