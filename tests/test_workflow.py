@@ -644,7 +644,8 @@ def test_chain_sp_lands_in_the_true_mass_basin_of_m1(run_chain):
     shear. With 36 live points the quick SP from the anchor's priors stopped in a false
     mode (q 0.65, shear 0.067, centre y −0.004, max ln L −39,655); with the profile's 60
     it reached q 0.80, shear 0.006, centre (0.014, −0.074) and θ_E 1.187 (max ln L
-    −7,019).
+    −7,019). The quick profile now starts SP from the lensed arcs (``sp_start: search``):
+    19,293 calls, max ln L −7,024 (docs/slam.md, "SP's start in the quick profile").
     """
     results = run_chain("M1") / "results" / "M1"
     sp = json.loads((results / "sp" / "result.json").read_text())
