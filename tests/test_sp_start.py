@@ -341,7 +341,7 @@ def test_pn_mge_searches_its_start_with_the_non_negative_solve(mock_folder, tmp_
         mock_folder, mock_folder, settings_from_mapping({"fit": {"positive_only": False}}), LENS
     )
     nn = sp_phase.problem(mock_folder, mock_folder, settings_from_mapping({}), LENS)
-    assert sp_start.search_dataset(nn.dataset) is nn.dataset
+    assert nn.dataset.non_negative() is nn.dataset
     seen = {}
 
     def search(dataset, space, model, likelihood, radius):

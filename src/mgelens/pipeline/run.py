@@ -526,9 +526,9 @@ def started_sp(problem: PhaseProblem, folder: Path, checksums: dict) -> PhasePro
     """SP's problem with its priors passed from the arcs' start (:mod:`sp_start`), read
     from ``folder/start.json`` when it was found for the same inputs (``checksums``, of
     ``problem.inputs``) and settings. The search solves non-negatively whatever SP's
-    ``positive_only`` (:func:`sp_start.search_dataset`)."""
+    ``positive_only`` (:meth:`~mgelens.fit.FitDataset.non_negative`)."""
     fingerprint = problem_fingerprint(problem, checksums)
-    dataset = sp_start.search_dataset(problem.dataset)
+    dataset = problem.dataset.non_negative()
     likelihood = PhaseLikelihood(dataset, problem.space, problem.model)
     start = sp_start.read_or_search(
         folder,

@@ -33,7 +33,8 @@ the mass puts it; local optimisers started from round masses fall into the same 
    the light-shaped point reaches a far higher maximum near the true mass
    (docs/paper_mocks.md, M3).
 
-Every step runs with the non-negative linear solve (:func:`search_dataset`), also where
+Every step runs with the non-negative linear solve (:meth:`FitDataset.non_negative`,
+called by :func:`mgelens.pipeline.run.started_sp`), also where
 SP itself samples the unconstrained one (pn-MGE, ``positive_only: false``): there the
 MGE's negative Gaussians can take up the arcs, so a mass that sends the source elsewhere
 costs little and SP's likelihood does not single out the lens mass; on M3 its polish
@@ -325,12 +326,6 @@ def _arc_start(values: dict, arcs: ArcMass, centre: tuple[float, float]) -> dict
         f"{models.SOURCE}.set_0.centre_x": arcs.source_x,
         f"{models.SOURCE}.set_0.centre_y": arcs.source_y,
     }
-
-
-def search_dataset(dataset: FitDataset) -> FitDataset:
-    """The dataset the start searches on: ``dataset`` with the non-negative solve
-    (:meth:`FitDataset.non_negative`), whatever SP samples (see the module)."""
-    return dataset.non_negative()
 
 
 def search(
