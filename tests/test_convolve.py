@@ -141,10 +141,12 @@ def test_auto_blurs_a_gaussian_psf_separably_and_a_full_rank_one_otherwise(asymm
     mask = np.hypot(x, y) > 1.2
     gaussian = Convolver(mask, gaussian_psf(9, 1.0))
     n_in = np.count_nonzero(~gaussian.extended_mask)
-    assert gaussian._method_for(n_in, True, "auto") == "separable"
+    assert gaussian._method_for(True, "auto") == "separable"
+    assert gaussian.column_cost(True) == 18 * n_in  # one term: a row and a column pass
     full_rank = np.random.default_rng(3).random((9, 9))
     full = Convolver(mask, full_rank / full_rank.sum())
-    assert full._method_for(n_in, True, "auto") != "separable"
+    assert full._method_for(True, "auto") != "separable"
+    assert full.column_cost(True) < 9 * 18 * n_in
 
 
 def test_blurring_region_lets_outside_light_in(asymmetric_psf):

@@ -18,6 +18,7 @@ from mgelens.fit_settings import FitSettings
 from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
+from mgelens.inversion.system import WeightedBlurredMapping
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import SIE, ExternalShear
 from mgelens.source.image_mesh import overlay_centres
@@ -117,10 +118,13 @@ def test_pixelized_noiseless_fit_recovers_lens_light_and_source():
     assert np.allclose(split[~dataset.mask], result.model_image)
 
 
-def test_repeated_mass_and_source_reuse_the_source_system():
+@pytest.mark.parametrize("sparse_pass", [True, False])
+def test_repeated_mass_and_source_reuse_the_source_system(sparse_pass, monkeypatch):
     """LIGHT-phase pattern: mass and source object fixed, lens light changing. From the
-    second fit on, the source's part of the system is reused; every figure matches a fit
-    on a fresh dataset (which builds the whole system)."""
+    second fit on, the source's part of the system is reused, with F_LS by either route
+    (a sparse pass over W B f, or a transposed blur); every figure matches a fit on a
+    fresh dataset (which builds the whole system by tiles)."""
+    monkeypatch.setattr(WeightedBlurredMapping, "cheaper", lambda *args: sparse_pass)
     rng = np.random.default_rng(4)
     blank = make_dataset()
     data = np.zeros(SHAPE)
@@ -137,7 +141,8 @@ def test_repeated_mass_and_source_reuse_the_source_system():
         fresh = fit(make_dataset(data), model)
         assert reused.log_evidence == pytest.approx(fresh.log_evidence, rel=1e-10)
         np.testing.assert_allclose(reused.solution.x, fresh.solution.x, rtol=1e-6, atol=1e-9)
-    assert dataset._source_cache["system"] is not None
+    system = dataset._source_cache["system"]
+    assert (system.weighted_blurred is not None) == sparse_pass
     # another mass model (equal by value is enough) or source object starts afresh
     moved = (SIE((0.02, -0.03), 1.12, 0.8, 40.0), MASS[1])
     fit(dataset, LensModel(mass=moved, lens_light=(first,), source=source))

@@ -9,6 +9,7 @@ from mgelens.grid import pixel_centres
 from mgelens.inversion.system import (
     DenseTerms,
     TilePlan,
+    WeightedBlurredMapping,
     curvature_matrix,
     data_vector,
     weighted_gram,
@@ -93,6 +94,10 @@ def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
     assert np.allclose(terms.products, operator.T @ (inverse_variance[:, None] * dense))
     cached = curvature_matrix(dense, f, plan, inverse_variance, dense_terms=terms)
     assert np.allclose(cached, expected, rtol=1e-12, atol=1e-12)
+    weighted_blurred = WeightedBlurredMapping.build(operator @ f, inverse_variance)
+    f_ls = expected[:4, 4:]
+    assert np.allclose(weighted_blurred.lens_source(dense), f_ls, rtol=1e-12, atol=1e-12)
+    assert np.allclose(terms.lens_source(f), f_ls, rtol=1e-12, atol=1e-12)
     no_light = curvature_matrix(np.zeros((n_pixels, 0)), f, plan, inverse_variance)
     assert np.allclose(no_light, expected[4:, 4:], rtol=1e-12, atol=1e-12)
     only_light = curvature_matrix(dense, None, None, inverse_variance)
@@ -111,3 +116,43 @@ def test_weighted_gram_is_symmetric_and_takes_no_columns(capfd):
     assert np.array_equal(gram, gram.T)
     assert weighted_gram(np.zeros((50, 0)), w).shape == (0, 0)
     assert "illegal" not in capfd.readouterr().out
+
+
+def block_mapping(mask, block):
+    """f of an unlensed square mesh: each unmasked pixel lies in one source pixel, the
+    block × block cell that holds it (a local mapping, like a real mesh's)."""
+    rows, cols = np.nonzero(~mask)
+    cell = (rows // block) * (mask.shape[1] // block + 1) + cols // block
+    _, index = np.unique(cell, return_inverse=True)
+    return sparse.csr_matrix((np.ones(rows.size), (np.arange(rows.size), index)))
+
+
+def test_lens_source_terms_take_the_cheaper_of_a_sparse_pass_and_a_transposed_blur():
+    """F_LS = Lᵀ W B f by one sparse pass over W B f costs nnz(B f) per column; by a
+    transposed blur, the blur plus nnz(f). On a 3″ mask of 0.05″ pixels with a local
+    mapping (a real mesh's kind) the pass is cheaper, for an HST-like 15×15 full-rank
+    PSF and even for a 3×3 one; a mapping that sends every pixel to 3 of 30 scattered
+    source pixels makes B f nearly dense and the blur (direct, 3×3) cheaper. Both routes
+    give Lᵀ W B f."""
+    rng = np.random.default_rng(2)
+    x, y = pixel_centres((135, 135), 0.05)
+    mask = np.hypot(x, y) > 3.0
+    n_pixels = np.count_nonzero(~mask)
+    local = block_mapping(mask, 5)
+    scattered = mapping_matrix(random_weights(rng, n_pixels, 30, sub=1)[0])
+    dense = rng.normal(size=(n_pixels, 3))
+    inverse_variance = rng.uniform(0.5, 2.0, n_pixels)
+    full_rank, small = rng.random((15, 15)), gaussian_kernel((3, 3), 1, 1)
+    for psf, f, sparse_pass in (
+        (full_rank, local, True),
+        (small, local, True),
+        (small, scattered, False),
+    ):
+        convolver = Convolver(mask, psf / psf.sum())
+        blurred = convolver.operator(include_blurring=False) @ f
+        assert WeightedBlurredMapping.cheaper(blurred, f, convolver) == sparse_pass
+        expected = (blurred.T @ (inverse_variance[:, None] * dense)).T
+        by_blur = DenseTerms.build(dense, inverse_variance, convolver).lens_source(f)
+        by_pass = WeightedBlurredMapping.build(blurred, inverse_variance).lens_source(dense)
+        assert np.allclose(by_blur, expected, rtol=1e-12, atol=1e-10)
+        assert np.allclose(by_pass, expected, rtol=1e-12, atol=1e-10)

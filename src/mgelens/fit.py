@@ -30,7 +30,14 @@ from mgelens.inversion.evidence import (
     noise_normalization,
 )
 from mgelens.inversion.solve import LinearSolution, solve_linear_system
-from mgelens.inversion.system import DenseTerms, TilePlan, curvature_matrix, data_vector
+from mgelens.inversion.system import (
+    DenseTerms,
+    TilePlan,
+    WeightedBlurredMapping,
+    curvature_matrix,
+    data_vector,
+    weighted_gram,
+)
 from mgelens.light import LightGrid, MGESet
 from mgelens.mask import validate_mask
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -390,11 +397,12 @@ class SourceOperator:
 @dataclass(frozen=True, eq=False)
 class SourceSystem:
     """The parts of the linear system that depend on mass and source only: the operator,
-    F_SS + H (dense) and ln det H."""
+    F_SS + H (dense), ln det H and, where it is the cheaper route to F_LS, W B f."""
 
     operator: SourceOperator
     curvature_regularization: np.ndarray
     log_det_regularization: float
+    weighted_blurred: WeightedBlurredMapping | None
 
     @classmethod
     def build(cls, dataset: FitDataset, mass, source: "PixelizedSource") -> "SourceSystem":
@@ -403,16 +411,27 @@ class SourceSystem:
         none = np.zeros((dataset.data.size, 0))
         f_ss = curvature_matrix(none, operator.mapping, dataset.tile_plan, dataset.inverse_variance)
         f_ss += h.toarray()
-        return cls(operator, f_ss, log_det_regularization(h))
+        blurred = operator.blurred_mapping
+        weighted_blurred = (
+            WeightedBlurredMapping.build(blurred, dataset.inverse_variance)
+            if WeightedBlurredMapping.cheaper(blurred, operator.mapping, dataset.convolver)
+            else None
+        )
+        return cls(operator, f_ss, log_det_regularization(h), weighted_blurred)
 
     def curvature(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
         """The full [dense | source] matrix F + H for new ``dense`` columns L of
-        ``dataset``, with F_LS = (fᵀ Bᵀ W L)ᵀ (a transposed blur, then a sparse product)."""
+        ``dataset``. F_LS = Lᵀ (W B f) in one sparse pass where that is cheaper (large
+        full-rank PSFs), else (fᵀ Bᵀ W L)ᵀ: a transposed blur, then a sparse product."""
         n_dense = dense.shape[1]
-        terms = DenseTerms.build(dense, dataset.inverse_variance, dataset.convolver)
         q = np.empty((n_dense + self.curvature_regularization.shape[0],) * 2)
-        q[:n_dense, :n_dense] = terms.gram
-        f_ls = terms.lens_source(self.operator.mapping)
+        if self.weighted_blurred is None:
+            terms = DenseTerms.build(dense, dataset.inverse_variance, dataset.convolver)
+            q[:n_dense, :n_dense] = terms.gram
+            f_ls = terms.lens_source(self.operator.mapping)
+        else:
+            q[:n_dense, :n_dense] = weighted_gram(dense, dataset.inverse_variance)
+            f_ls = self.weighted_blurred.lens_source(dense)
         q[:n_dense, n_dense:] = f_ls
         q[n_dense:, :n_dense] = f_ls.T
         q[n_dense:, n_dense:] = self.curvature_regularization
