@@ -452,26 +452,30 @@ class Convolver:
     def _separable_terms(self) -> tuple:
         return separable_terms(self.psf)
 
-    def _costs(self, include_blurring: bool) -> dict[str, float]:
-        """Operation-count estimate of blurring one column by each method."""
-        n_in = int(np.count_nonzero(~self.input_mask(include_blurring)))
-        shape = self._fft_geometries[include_blurring].shape
+    @cached_property
+    def _costs(self) -> dict[bool, dict[str, float]]:
+        """Operation-count estimate of blurring one column by each method, per input
+        region (by ``include_blurring``)."""
         n_terms = self._separable_terms[0].shape[0]
-        return {
-            "direct": _direct_cost(self.psf, n_in),
-            "fft": _fft_cost(shape),
-            "separable": float(n_terms * sum(self.psf.shape)) * n_in,
-        }
+        costs = {}
+        for blurring in (True, False):
+            n_in = int(np.count_nonzero(~self.input_mask(blurring)))
+            costs[blurring] = {
+                "direct": _direct_cost(self.psf, n_in),
+                "fft": _fft_cost(self._fft_geometries[blurring].shape),
+                "separable": float(n_terms * sum(self.psf.shape)) * n_in,
+            }
+        return costs
 
     def column_cost(self, include_blurring: bool) -> float:
         """Estimated operations to blur one column by the method ``auto`` picks (about
         one multiply-add each for the direct and separable routes)."""
-        return min(self._costs(include_blurring).values())
+        return min(self._costs[include_blurring].values())
 
     def _method_for(self, include_blurring: bool, method: str) -> str:
         if method != "auto":
             return method
-        costs = self._costs(include_blurring)
+        costs = self._costs[include_blurring]
         return min(costs, key=costs.get)
 
     def blur_columns(

@@ -138,16 +138,19 @@ class WeightedBlurredMapping:
     on every call).
 
     :class:`DenseTerms` gets F_LS from a transposed blur of every column of W L, then a
-    sparse product with f; here each column costs ``nnz`` multiply-adds instead, and no
+    sparse product with f; here each column costs nnz(B f) multiply-adds instead, and no
     blur. :meth:`cheaper` chooses between the two by an operation count.
 
     Attributes
     ----------
-    matrix : scipy.sparse.csc_matrix (N_I, n_source)
-        W B f, sorted indices.
+    indptr, indices, values : ndarray
+        W B f (N_I × n_source) in compressed-column form, sorted indices, int64 index
+        arrays as the compiled pass takes them.
     """
 
-    matrix: sparse.csc_matrix
+    indptr: np.ndarray
+    indices: np.ndarray
+    values: np.ndarray
 
     @classmethod
     def build(
@@ -156,7 +159,7 @@ class WeightedBlurredMapping:
         """From B f (N_I, n_source) and the w_i (N_I,)."""
         matrix = sparse.csc_matrix(sparse.diags(inverse_variance) @ blurred_mapping)
         matrix.sort_indices()
-        return cls(matrix)
+        return cls(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.data)
 
     @staticmethod
     def cheaper(blurred_mapping: sparse.spmatrix, mapping: sparse.spmatrix, convolver) -> bool:
@@ -167,14 +170,9 @@ class WeightedBlurredMapping:
 
     def lens_source(self, dense: np.ndarray) -> np.ndarray:
         """F_LS = Lᵀ W B f (n_dense, n_source) of dense columns L (N_I, n_dense)."""
-        m = self.matrix
-        out = np.empty((m.shape[1], dense.shape[1]))
+        out = np.empty((self.indptr.size - 1, dense.shape[1]))
         _transposed_sparse_product(
-            m.indptr.astype(np.int64),
-            m.indices.astype(np.int64),
-            m.data,
-            np.ascontiguousarray(dense),
-            out,
+            self.indptr, self.indices, self.values, np.ascontiguousarray(dense), out
         )
         return out.T
 
