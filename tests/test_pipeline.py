@@ -132,6 +132,29 @@ def test_sp_space_has_17_parameters_and_one_shared_lens_light_centre():
     assert first.sigmas[-1] == pytest.approx(MASK_RADIUS)
 
 
+def test_sp_mass_centre_tied_to_the_light_is_freed_by_spix1_with_the_width_of_a_tied_centre():
+    """``sp_mass_centre: light``: SP's SIE centre follows the lens light's (15 free), and
+    SPix1 frees it with N(SP's centre, 0.05″) (SPEC §8.2: a tied centre has no width of
+    its own), however narrow the light centre's posterior was."""
+    space = sp_phase.space(SP_SPECS, mass_centre="light")
+    assert space.n_free == 15
+    assert space.parameter("mass.centre_x").tied_to == "lens_light.set_0.centre_x"
+    assert space.parameter("mass.centre_y").tied_to == "lens_light.set_0.centre_y"
+    values = space.values(space.vector(SP_VALUES))
+    sie, _ = models.mass_profiles(values)
+    assert sie.centre == (SP_VALUES["lens_light.set_0.centre_x"],
+                          SP_VALUES["lens_light.set_0.centre_y"])  # fmt: skip
+    sp = fake_result("sp", space, SP_VALUES, scale=0.002)
+    spix1 = spix1_phase.space(sp)
+    assert spix1.n_free == 8
+    for axis in ("centre_x", "centre_y"):
+        prior = spix1.parameter(f"mass.{axis}").prior
+        assert prior.mean == pytest.approx(sp.median[f"lens_light.set_0.{axis}"])
+        assert prior.sigma == 0.05
+    with pytest.raises(ValueError, match="'free' or 'light'"):
+        sp_phase.space(SP_SPECS, mass_centre="fixed")
+
+
 def test_phase_spaces_have_the_papers_free_parameter_counts(chain):
     assert spix1_phase.space(chain["sp"]).n_free == 8
     assert spix2_phase.space(chain["sp"], chain["spix1"]).n_free == 5

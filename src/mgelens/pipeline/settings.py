@@ -60,6 +60,7 @@ KMEANS_SCHEMES = ("2023", "2024")
 CROSS_OFFSETS = ("anchor", "paper")
 PRIOR_PASSING_RULES = ("paper", "2024")
 SP_STARTS = ("prior", "search")
+SP_MASS_CENTRES = ("free", "light")
 
 
 FIT_KEYS = frozenset(f.name for f in dataclasses.fields(FitSettings))
@@ -124,6 +125,11 @@ class SlamSettings:
         ``config/paper.yaml`` for either profile). Without it SP settled in a degenerate
         mass on real imaging (docs/slacs.md), and on M1–M3 it needs fewer calls
         (docs/slam.md, "SP's start in the quick profile").
+    sp_mass_centre : {"free", "light"}
+        SP's SIE centre: free with the anchor's prior N(c, 0.1″) (``free``, SPEC §3.1), or
+        tied to the lens light's shared centre (``light``: 15 free parameters instead of
+        17). SPix1 frees it either way, with the passed prior N(SP's centre, 0.05″) of a
+        centre that was tied (SPEC §8.2), so the mass can leave the light from SPix1 on.
     positions_penalty : bool
         Require the multiple images of SP's source centre to re-converge in the source
         plane in SPix1 and MASS (SPEC §12.21; off in the paper profile, on in quick, where
@@ -167,6 +173,7 @@ class SlamSettings:
     adaptive_signals: str = "anchor"
     prior_passing: str = "paper"
     sp_start: str = "prior"
+    sp_mass_centre: str = "free"
     positions_penalty: bool = False
     positions_factor: float = 3.0
     positions_minimum: float = 0.2
@@ -234,6 +241,7 @@ _CHOICES = {
     "adaptive_signals": SIGNAL_AVERAGES,
     "prior_passing": PRIOR_PASSING_RULES,
     "sp_start": SP_STARTS,
+    "sp_mass_centre": SP_MASS_CENTRES,
 }
 """Fields taking one of a few strings."""
 _INTEGERS = {

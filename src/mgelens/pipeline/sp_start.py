@@ -428,10 +428,13 @@ def polish(
     """Step 4: the better of two Powell polishes of every parameter from ``x``, both with
     the mass centre within :data:`MASS_CENTRE_RANGE` of the light ``centre``, the second
     with θ_E within :data:`ARC_EINSTEIN_RANGE` of ``arcs_einstein_radius``. Returns the
-    point, its ln P and whether the held polish won (a tie goes to the free one)."""
+    point, its ln P and whether the held polish won (a tie goes to the free one). A mass
+    centre tied to the light (``slam.sp_mass_centre: light``) is not among ``names`` and
+    needs no box."""
     box = {
         names.index(f"mass.{axis}"): (c - MASS_CENTRE_RANGE, c + MASS_CENTRE_RANGE)
         for axis, c in zip(("centre_x", "centre_y"), centre, strict=True)
+        if f"mass.{axis}" in names
     }
     low, high = ARC_EINSTEIN_RANGE
     theta = names.index("mass.einstein_radius")

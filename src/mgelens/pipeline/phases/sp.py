@@ -17,17 +17,28 @@ from mgelens.search.priors import Gaussian
 
 
 def space(
-    specs: Sequence[models.LightSpec], centre: tuple[float, float] = (0.0, 0.0)
+    specs: Sequence[models.LightSpec],
+    centre: tuple[float, float] = (0.0, 0.0),
+    mass_centre: str = "free",
 ) -> ParameterSpace:
     """SP: lens light (shared centre N(c, 0.3″), ell_comps N(0, 0.3)), SIE + shear,
     1×20 source MGE (centre N(c, 0.3″)): 6 + 7 + 4 = 17 free parameters for 2 MGE sets,
-    10 + 7 + 4 = 21 for 2 Sérsics."""
+    10 + 7 + 4 = 21 for 2 Sérsics. ``mass_centre`` ``"light"`` ties the SIE centre to the
+    lens light's shared centre (15 or 19 free parameters; ``slam.sp_mass_centre``)."""
     wide = (Gaussian(centre[0], 0.3), Gaussian(centre[1], 0.3))
     light = models.lens_light_parameters(specs, wide, models.ELL_COMPS_PRIOR)
     source = models.geometry_parameters(
         f"{models.SOURCE}.set_0", wide, (models.ELL_COMPS_PRIOR,) * 2
     )
-    return ParameterSpace((*light, *models.free_parameters(models.sp_mass_priors(centre)), *source))
+    mass = models.free_parameters(models.sp_mass_priors(centre))
+    result = ParameterSpace((*light, *mass, *source))
+    if mass_centre == "light":
+        first = light[0].name.removesuffix(".centre_x")
+        for axis in ("centre_x", "centre_y"):
+            result = result.tie(f"mass.{axis}", f"{first}.{axis}")
+    elif mass_centre != "free":
+        raise ValueError(f"mass_centre must be 'free' or 'light', got {mass_centre!r}")
+    return result
 
 
 def problem(
@@ -44,7 +55,7 @@ def problem(
     return PhaseProblem(
         "sp",
         dataset,
-        space(specs, lens.mask_centre),
+        space(specs, lens.mask_centre, settings.sp_mass_centre),
         models.PhaseModel(specs, models.MGESourceModel()),
         tuple(imaging_files(lens_dir)),
         radius,
