@@ -153,6 +153,10 @@ def test_sp_mass_centre_tied_to_the_light_is_freed_by_spix1_with_the_width_of_a_
         assert prior.sigma == 0.05
     with pytest.raises(ValueError, match="'free' or 'light'"):
         sp_phase.space(SP_SPECS, mass_centre="fixed")
+    with pytest.raises(SettingsError, match=r"slam\.sp_mass_centre"):
+        settings_from_mapping({"sp_mass_centre": "fixed"})
+    assert settings_from_mapping({"sp_mass_centre": "light"}).sp_mass_centre == "light"
+    assert profile_settings("quick").sp_mass_centre == "free"
 
 
 def test_phase_spaces_have_the_papers_free_parameter_counts(chain):
