@@ -11,7 +11,7 @@ from mgelens.pipeline.problem import (
     imaging_files,
     load_dataset,
 )
-from mgelens.pipeline.settings import LensSpec, SlamSettings
+from mgelens.pipeline.settings import SP_MASS_CENTRES, LensSpec, SlamSettings
 from mgelens.search.model import ParameterSpace
 from mgelens.search.priors import Gaussian
 
@@ -30,14 +30,14 @@ def space(
     source = models.geometry_parameters(
         f"{models.SOURCE}.set_0", wide, (models.ELL_COMPS_PRIOR,) * 2
     )
+    if mass_centre not in SP_MASS_CENTRES:
+        raise ValueError(f"mass_centre must be 'free' or 'light', got {mass_centre!r}")
     mass = models.free_parameters(models.sp_mass_priors(centre))
     result = ParameterSpace((*light, *mass, *source))
     if mass_centre == "light":
         first = light[0].name.removesuffix(".centre_x")
         for axis in ("centre_x", "centre_y"):
             result = result.tie(f"mass.{axis}", f"{first}.{axis}")
-    elif mass_centre != "free":
-        raise ValueError(f"mass_centre must be 'free' or 'light', got {mass_centre!r}")
     return result
 
 
