@@ -152,6 +152,8 @@ def write_lens_folder(root, lens, theta, q, slope, names, measured, flag):
                "lensing": {"critical_curve_einstein_radius": 1.0 if measured else None,
                            "flag": not measured, "reason": "",
                            "centre_offset": 0.02 if measured else None}}  # fmt: skip
+    if flag:  # a record of the sky's τ; the others predate the key
+        quality["noise_scale_from"] = "sky"
     write_json(folder / "quality.json", quality)
     y, x = (np.indices(SHAPE) - 20) * PIXEL
     mask = np.hypot(x, y) > RADIUS
@@ -225,6 +227,8 @@ def test_lens_table_converts_and_compares(lens_folders, reference):
     assert mock["light_model"] == "3xSersic"
     assert pd.isna(mock["quality_flag"])
     assert (sie["lensing_flag"], epl["lensing_flag"], mock["lensing_flag"]) == (False, False, True)
+    sources = [t["quality_noise_scale_from"] for t in (sie, epl, mock)]
+    assert [s if isinstance(s, str) else "" for s in sources] == ["residuals", "sky", ""]
     assert sie["mass_light_offset"] == 0.02
     assert math.isnan(mock["mass_light_offset"])
     assert mock[["bolton_b_sie", "shajib_theta_e", "quality_statistic"]].isna().all()

@@ -54,6 +54,9 @@ theta_e_over_shajib             theta_e_lt / shajib_theta_e
 quality_statistic               coherence significance K of :mod:`mgelens.quality`
 quality_peak                    largest block |z| / τ
 quality_flag                    K or the peak above its threshold (empty: not measured)
+quality_noise_scale_from        where its noise scale τ came from: ``residuals`` (the
+                                judged blocks), ``sky`` (beyond the fit circle, when the
+                                lensed source leaves too few blocks) or empty
 lensing_flag                    the MASS model has no closed, galaxy-like tangential critical
                                 curve around the lens light in the fit circle
                                 (:func:`mgelens.quality.lensing_check`), or its centre lies
@@ -118,6 +121,7 @@ FIT_COLUMNS = (
     "quality_statistic",
     "quality_peak",
     "quality_flag",
+    "quality_noise_scale_from",
     "lensing_flag",
     "mass_light_offset",
 )  # fmt: skip
@@ -247,6 +251,9 @@ def _fit_row(lens_folder: Path) -> dict:
         row["quality_statistic"] = _number(quality["significance"])
         row["quality_peak"] = _number(quality["peak"])
         row["quality_flag"] = bool(quality["flag"]) if quality["measured"] else pd.NA
+        # records written before the sky's τ existed took τ from the residuals
+        measured_from = "residuals" if quality["measured"] else ""
+        row["quality_noise_scale_from"] = quality.get("noise_scale_from", measured_from)
         row["lensing_flag"] = bool(quality["lensing"]["flag"])
         row["mass_light_offset"] = _number(quality["lensing"]["centre_offset"])
     except FileNotFoundError as exc:

@@ -7,14 +7,16 @@ Example::
 
 Reads the phase's ``model.fits`` (NRESID, LENSED), its fit mask (``mask_radius`` and
 ``lens.mask_centre`` of ``result.json``, combined with the lens folder's ``mask.fits`` if
-any) and the lens's noise map, and writes the statistic of :mod:`mgelens.quality` as JSON::
+any), the lens's data (for the sky's τ beyond the fit circle, step 6 of
+:mod:`mgelens.quality`) and noise map, and writes the statistic as JSON::
 
     {"lens": ..., "phase": ..., "mgelens_version": ..., "measured": true, "flag": false,
      "coherence": S, "significance": K, "peak": z_max, "n_outlier_blocks": ...,
      "noise_scale": τ, "coherence_white": ..., "worst_x": ..., "worst_y": ...,
      "n_pixels": ..., "n_blocks": ..., "n_pairs": ..., "block_pixels": k,
-     "block_arcsec": ..., "coherence_threshold": ..., "peak_threshold": ...,
-     "inputs": {...}}
+     "block_arcsec": ..., "noise_scale_from": "residuals" | "sky" | "",
+     "sky_noise_scale": ..., "n_sky_pairs": ..., "coherence_threshold": ...,
+     "peak_threshold": ..., "inputs": {...}}
 
 (worst_x, worst_y in arcsec: the used-pixel centroid of the block of largest |z_b|), and
 under ``lensing`` the check of :func:`mgelens.quality.lensing_check` of the phase's
@@ -32,8 +34,8 @@ from astropy.io import fits
 
 from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.atomic import write_json
-from mgelens.imaging import Imaging
-from mgelens.imaging_input import ImagingError
+from mgelens.imaging import MASK_FILE, Imaging
+from mgelens.imaging_input import ImagingError, read_fits_mask
 from mgelens.mask import circular
 from mgelens.pipeline.records import (
     MODEL_FILE,
@@ -43,7 +45,7 @@ from mgelens.pipeline.records import (
     read_result_record,
     recorded_lens,
 )
-from mgelens.quality import lensing_check, quality_statistic
+from mgelens.quality import lensing_check, quality_statistic, sky_pixels, sky_residual_map
 from mgelens.search.results import RESULT_FILE
 
 logger = logging.getLogger(__name__)
@@ -99,8 +101,24 @@ def run(args: argparse.Namespace) -> int:
         # the sheet's pixel scale, if the fit had one
         imaging = Imaging.from_folder(lens_dir, pixel_scale=spec.pixel_scale, mask_from=circle)
         nresid, lensed = read_residual_images(args.phase / MODEL_FILE)
+        mask_file = lens_dir / MASK_FILE
+        sky = sky_pixels(
+            imaging.data,
+            imaging.noise_map,
+            imaging.pixel_scale,
+            float(settings["mask_radius"]),
+            spec.mask_centre,
+            excluded=read_fits_mask(mask_file) if mask_file.is_file() else None,
+        )
         statistic = quality_statistic(
-            nresid, lensed, imaging.noise_map, imaging.mask, imaging.pixel_scale
+            nresid,
+            lensed,
+            imaging.noise_map,
+            imaging.mask,
+            imaging.pixel_scale,
+            sky_residuals=sky_residual_map(
+                imaging.data, imaging.noise_map, sky, imaging.pixel_scale
+            ),
         )
         fitted = fit_record_of(result, args.phase / RESULT_FILE)
         light = light_components(fitted)[0]
@@ -127,7 +145,9 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"{lens}: {state}; K = {statistic.significance:.2f} (S = {statistic.coherence:.3f}), "
         f"z_max = {statistic.peak:.2f} at ({statistic.worst_x:.2f}, {statistic.worst_y:.2f})″, "
-        f"{statistic.n_blocks} blocks, {statistic.n_pixels} pixels"
+        f"{statistic.n_blocks} blocks, {statistic.n_pixels} pixels, τ = "
+        f"{statistic.noise_scale:.3f} from the {statistic.noise_scale_from or 'nothing'} "
+        f"({statistic.n_pairs} residual pairs, {statistic.n_sky_pairs} sky pairs)"
     )
     if lensing.flag:
         print(f"{lens}: LENSING FLAG: {lensing.reason}")
