@@ -178,9 +178,10 @@ def main() -> None:
     }
     for ax, (title, error) in zip(panels, cases.items(), strict=True):
         residuals = rng.standard_normal(error.shape) + error / geo["noise"]
-        used = quality.used_pixels(residuals, geo["lensed"], geo["noise"], geo["mask"])
-        block = quality.block_pixels(geo["scale"])
-        blocks = quality.block_residuals(residuals, used, geo["scale"], block)
+        blocks = quality.judged_blocks(
+            residuals, geo["lensed"], geo["noise"], geo["mask"], geo["scale"]
+        )
+        block = blocks.block
         result = statistic(residuals, geo)
         n_y, n_x = geo["mask"].shape
         left = -(((block - (n_x // 2) % block) % block) + 0.5 + (n_x - 1) / 2) * geo["scale"]
