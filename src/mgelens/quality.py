@@ -37,7 +37,7 @@ Definition (all arrays native, row index = +y, SPEC §1.1):
    circle, not contaminants and not in the folder's mask, as (data − running median of
    side :data:`SKY_FILTER`)/σ (:func:`sky_residual_map`), blocked and paired as in steps 2–3.
    The running median removes the galaxy's smooth light and leaves PSF-scale noise: for
-   white and Gaussian-correlated noise this τ equals the residuals' τ within 1 %. It
+   white and Gaussian-correlated noise this τ equals the residuals' τ within 2 %. It
    does not see noise that a model absorbs (so it is ≥ the residuals' τ for a good fit) nor
    sky structure (which raises it): both make the flag more conservative, never less.
    With fewer than :data:`MIN_PAIRS` sky pairs too, or no judged block: no statistic
