@@ -265,6 +265,7 @@ def test_residual_mosaic_has_one_panel_per_lens_in_arcsec(lens_folders, tmp_path
         for path in lens_folders
     ]
     assert [p.state for p in panels] == ["ok", "FLAG", "n/a"]
+    assert [p.lensing_flag for p in panels] == [False, False, True]
     figure = residual_mosaic(panels)
     images = [ax for ax in figure.axes if ax.images and ax.get_title()]
     assert [ax.get_title() for ax in images] == [p.lens for p in panels]
@@ -276,7 +277,8 @@ def test_residual_mosaic_has_one_panel_per_lens_in_arcsec(lens_folders, tmp_path
         assert image.get_clim() == (-3.5, 3.5)
         assert ax.get_xlim() == pytest.approx((-1.9, 1.9))  # mask radius + one pixel
         assert ax.get_ylim() == pytest.approx((-1.9, 1.9))
-        assert {t.get_text() for t in ax.texts} == {"X2", panel.state}
+        lensing = {"LENSING"} if panel.lensing_flag else set()
+        assert {t.get_text() for t in ax.texts} == {"X2", panel.state} | lensing
     colour_bars = [ax for ax in figure.axes if ax.get_ylabel() == "(data − model)/σ [σ]"]
     assert len(colour_bars) == 1
     flagged = images[1].lines[0].get_xydata()[0]

@@ -5,8 +5,9 @@ scale of ±:data:`LIMIT` σ, with (x, y) arcsec axes (+x right, +y up, SPEC §1.
 the fitted pixels; contours of the lensed-source model at :data:`SOURCE_LEVELS` times the
 noise (σ = RESID / NRESID; pixels outside the 1σ contour are the ones the quality statistic
 uses, :mod:`mgelens.quality`); the light-model label and the quality state (``ok``,
-``FLAG`` with the worst block marked, or ``n/a`` when not measured) in the corners. One
-colour bar for all panels.
+``FLAG`` with the worst block marked, or ``n/a`` when not measured) in the corners, and
+``LENSING`` top left when the lensing check flags the mass model. One colour bar for all
+panels.
 """
 
 import math
@@ -40,7 +41,8 @@ class MosaicPanel:
     pixel_scale : float
         Arcsec per pixel.
     quality : dict
-        ``mgelens quality`` record (``measured``, ``flag``, ``worst_x``, ``worst_y``).
+        ``mgelens quality`` record (``measured``, ``flag``, ``worst_x``, ``worst_y``,
+        ``lensing``).
     """
 
     lens: str
@@ -55,6 +57,10 @@ class MosaicPanel:
         if not self.quality.get("measured"):
             return "n/a"
         return "FLAG" if self.quality.get("flag") else "ok"
+
+    @property
+    def lensing_flag(self) -> bool:
+        return bool(self.quality.get("lensing", {}).get("flag", False))
 
 
 def read_panel(model_path: str | os.PathLike, lens: str, light_model: str, quality: dict):
@@ -122,6 +128,17 @@ def residual_mosaic(panels: list[MosaicPanel]) -> Figure:
             color=colour,
             fontweight="bold",
         )
+        if panel.lensing_flag:
+            ax.text(
+                0.03,
+                0.97,
+                "LENSING",
+                transform=ax.transAxes,
+                va="top",
+                fontsize=8,
+                color="tab:red",
+                fontweight="bold",
+            )
         ax.tick_params(labelsize=7)
         ax.set_xlabel("x [arcsec]", fontsize=7)
         ax.set_ylabel("y [arcsec]", fontsize=7)
