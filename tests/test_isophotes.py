@@ -447,14 +447,16 @@ def test_isophote_figure(tmp_path):
     table = isophote_table(image, PIXEL_SCALE)
     sie = SIE(centre=(0.02, -0.03), einstein_radius=1.1, axis_ratio=0.75, angle=50.0)
     shape = mass_shape_from([sie], (0.72, 0.78), (48.0, 52.0))
-    figure = isophote_figure(image, PIXEL_SCALE, table, shape, title="test")
-    assert len(figure.axes) == 4
+    figure = isophote_figure(image, PIXEL_SCALE, table, shape, title="test", unit="e-/s")
+    assert len(figure.axes) == 5  # image, q, PA, a4 and the image's colour bar
+    assert figure.axes[-1].get_ylabel() == "log₁₀ lens light [e-/s per pixel]"
     path = tmp_path / "figure.png"
     save_png(figure, path)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert [p.name for p in tmp_path.iterdir()] == ["figure.png"]
     flat = np.ones((81, 81))
-    assert len(isophote_figure(flat, PIXEL_SCALE, isophote_table(flat, PIXEL_SCALE)).axes) == 4
+    flat_figure = isophote_figure(flat, PIXEL_SCALE, isophote_table(flat, PIXEL_SCALE))
+    assert flat_figure.axes[-1].get_ylabel() == "log₁₀ lens light [data units per pixel]"
 
 
 def test_isophotes_command(tmp_path, capsys):

@@ -138,8 +138,11 @@ def run(args: argparse.Namespace) -> int:
         }
         write_json(args.summary, lens_summary(lens, statistics, mass, inputs=inputs))
     if args.figure is not None:
+        image_file = (args.phase / MODEL_FILE) if args.phase is not None else args.image
+        extension = {"extname": "LENS"} if args.phase is not None else {}
+        unit = str(fits.getheader(image_file, **extension).get("BUNIT", "")).strip()
         figure = isophote_figure(
-            image, args.pixel_scale, table, mass=mass, centre=tuple(centre), title=lens
+            image, args.pixel_scale, table, mass=mass, centre=tuple(centre), title=lens, unit=unit
         )
         save_png(figure, args.figure)
     return 0

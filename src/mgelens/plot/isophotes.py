@@ -43,7 +43,8 @@ def _show_image(
     half_width: float,
     n_isophotes: int,
     origin: tuple[float, float],
-) -> None:
+):
+    """Draw the image panel; returns the image artist (for its colour bar)."""
     x, y = pixel_centres(image.shape, pixel_scale, origin)
     positive = image[np.isfinite(image) & (image > 0.0)]
     if len(table):
@@ -52,7 +53,7 @@ def _show_image(
         floor = positive.min() if positive.size else 1.0
     shown = np.log10(np.clip(np.nan_to_num(image, nan=floor), floor, None))
     half = 0.5 * pixel_scale
-    ax.imshow(
+    artist = ax.imshow(
         shown,
         origin="lower",
         cmap="gray_r",
@@ -79,6 +80,7 @@ def _show_image(
     ax.set_aspect("equal")
     ax.set_xlabel("x [arcsec]")
     ax.set_ylabel("y [arcsec]")
+    return artist
 
 
 def _mark_radii(ax: Axes, mass: MassShape | None) -> None:
@@ -169,6 +171,7 @@ def isophote_figure(
     n_isophotes: int = 8,
     origin: tuple[float, float] = (0.0, 0.0),
     title: str | None = None,
+    unit: str = "",
 ) -> Figure:
     """The per-lens isophote figure.
 
@@ -192,6 +195,8 @@ def isophote_figure(
     origin : (x, y) arcsec
         Grid origin of ``image`` (SPEC §1.1).
     title : str, optional
+    unit : str
+        Brightness unit of ``image`` per pixel, for the colour bar ("" = data units).
 
     Returns
     -------
@@ -207,7 +212,15 @@ def isophote_figure(
     q_ax = figure.add_subplot(grid[0, 1])
     pa_ax = figure.add_subplot(grid[1, 1], sharex=q_ax)
     a4_ax = figure.add_subplot(grid[2, 1], sharex=q_ax)
-    _show_image(image_ax, image, pixel_scale, table, mass, centre, half_width, n_isophotes, origin)
+    artist = _show_image(
+        image_ax, image, pixel_scale, table, mass, centre, half_width, n_isophotes, origin
+    )
+    figure.colorbar(
+        artist,
+        ax=image_ax,
+        shrink=0.8,
+        label=f"log₁₀ lens light [{unit or 'data units'} per pixel]",
+    )
     _plot_axis_ratio(q_ax, table, mass)
     _plot_angle(pa_ax, table, mass)
     _plot_a4(a4_ax, table)
