@@ -112,10 +112,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         make_output_folders(args.out, args.summary, args.figure, args.save_image)
         if args.phase is not None:
-            image, centre, mass = _phase_light(args)
+            image, centre, mass, unit = _phase_light(args)
             source = args.phase
         else:
-            image, centre, mass = _image_light(args), args.centre, None
+            (image, unit), centre, mass = _image_light(args), args.centre, None
             source = args.image
     except (ImagingError, ValueError, PhaseInputError, OSError) as exc:
         logger.error("%s", exc)
@@ -138,9 +138,6 @@ def run(args: argparse.Namespace) -> int:
         }
         write_json(args.summary, lens_summary(lens, statistics, mass, inputs=inputs))
     if args.figure is not None:
-        image_file = (args.phase / MODEL_FILE) if args.phase is not None else args.image
-        extension = {"extname": "LENS"} if args.phase is not None else {}
-        unit = str(fits.getheader(image_file, **extension).get("BUNIT", "")).strip()
         figure = isophote_figure(
             image, args.pixel_scale, table, mass=mass, centre=tuple(centre), title=lens, unit=unit
         )
@@ -148,8 +145,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _image_light(args: argparse.Namespace) -> np.ndarray:
-    """The lens-light image of ``args.image`` (convolved with ``--psf`` if given)."""
+def _image_light(args: argparse.Namespace) -> tuple[np.ndarray, str]:
+    """The lens-light image of ``args.image`` (convolved with ``--psf`` if given) and its
+    header's BUNIT ("" if none)."""
     image, header = read_fits_image(args.image)
     image = np.asarray(image, dtype=float)
     bad = int(np.count_nonzero(~np.isfinite(image)))
@@ -168,11 +166,11 @@ def _image_light(args: argparse.Namespace) -> np.ndarray:
     args.pixel_scale = check_positive(args.pixel_scale, "--pixel-scale (arcsec/pixel)")
     if args.psf is not None:
         image = convolve_image(image, read_psf(args.psf))
-    return image
+    return image, str(header.get("BUNIT", "")).strip()
 
 
 def _phase_light(args: argparse.Namespace):
-    """(image, centre, MassShape) of the lens light of the phase folder ``args.phase``."""
+    """(image, centre, MassShape, BUNIT) of the lens light of the phase folder ``args.phase``."""
     if args.psf is None:
         raise ValueError("--phase needs --psf: the PSF of the lens's imaging (psf.fits)")
     if args.pixel_scale is not None:
@@ -188,8 +186,8 @@ def _phase_light(args: argparse.Namespace):
     profiles = lens_light_profiles(args.phase)
     centre = profiles[0].centre
     image = render_light(profiles, args.pixel_scale, psf=read_psf(args.psf), centre=centre)
+    unit = str(lens_header.get("BUNIT", "")).strip()
     if args.save_image is not None:
-        unit = lens_header.get("BUNIT", "")
         header = fits.Header({PIXSCALE_KEY: args.pixel_scale, "BUNIT": unit})
         header["PHASE"] = str(args.phase)[-68:]
         write_fits(args.save_image, fits.PrimaryHDU(image.astype(np.float32), header))
@@ -199,4 +197,4 @@ def _phase_light(args: argparse.Namespace):
         axis_ratio_interval=interval.get("mass.axis_ratio"),
         angle_interval=interval.get("mass.angle"),
     )
-    return image, centre, mass
+    return image, centre, mass, unit
