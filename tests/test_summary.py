@@ -11,18 +11,21 @@ from astropy.io import fits
 from mgelens.atomic import write_json
 from mgelens.cli import main
 from mgelens.isophotes import IsophoteStatistics, MassShape
+from mgelens.pipeline.model_choice import Candidate, choice_record, choose
 from mgelens.plot import save_png
 from mgelens.plot.comparison import einstein_radius_figure
 from mgelens.plot.mosaic import read_panel, residual_mosaic
 from mgelens.plot.summary import histogram_figure
 from mgelens.summary import (
     FIT_COLUMNS,
+    LIGHT_MODEL_COLUMNS,
     TABLE_COLUMNS,
     complex_fraction,
     complex_lenses,
     lens_summary,
     lens_table,
     light_model_label,
+    light_model_table,
     sample_table,
 )
 
@@ -234,6 +237,56 @@ def test_lens_table_converts_and_compares(lens_folders, reference):
     assert mock[["bolton_b_sie", "shajib_theta_e", "quality_statistic"]].isna().all()
 
 
+CANDIDATES = (
+    # label, ln Z, χ², linear unknowns, free parameters
+    ("X2+point", 100.0, 950.0, 570, 10),
+    ("X6+point", 103.0, 940.0, 690, 18),  # higher ln Z, but by less than the threshold 5
+    ("X2", 90.0, 990.0, 560, 6),
+)
+
+
+def write_choice(folder, chosen_label=None):
+    """folder/model_choice.json as rule choose_light writes it, over :data:`CANDIDATES`
+    (the choice by :func:`choose` unless ``chosen_label`` overrides it)."""
+    found = [Candidate(label, ln_z, 0.3, ln_z + 1, ln_z + 50, chi2, n_linear, n_free, True)
+             for label, ln_z, chi2, n_linear, n_free in CANDIDATES]  # fmt: skip
+    chosen = choose(found, 5.0)
+    if chosen_label is not None:
+        chosen = next(c for c in found if c.label == chosen_label)
+    write_json(folder / "model_choice.json", choice_record(found, chosen, 5.0))
+
+
+def test_lens_table_reads_the_evidence_choice(lens_folders, reference):
+    write_choice(lens_folders[0].parent)  # slacs0029-0055, whose MASS fitted X2+point
+    table = lens_table(lens_folders, reference).set_index("lens")
+    assert list(table["light_chosen_by"]) == ["sheet", "evidence", "sheet"]  # M1 sorts first
+    chosen = table.loc["slacs0029-0055"]
+    assert chosen["light_model"] == "X2+point"
+    assert chosen["light_evidence_margin"] == pytest.approx(100.0 - 103.0)
+    assert table.loc[["M1", "slacs0037-0942"], "light_evidence_margin"].isna().all()
+    candidates = light_model_table(
+        (path.parent.name, path.parent) for path in lens_folders
+    ).set_index("candidate")
+    assert list(candidates.columns) == [c for c in LIGHT_MODEL_COLUMNS if c != "candidate"]
+    assert set(candidates["lens"]) == {"slacs0029-0055"}
+    for label, ln_z, chi2, n_linear, n_free in CANDIDATES:
+        row = candidates.loc[label]
+        assert (row["log_evidence"], row["chi_squared"]) == (ln_z, chi2)
+        assert (row["n_linear"], row["n_free"], row["converged"]) == (n_linear, n_free, True)
+        assert row["chosen"] == (label == "X2+point")
+
+
+def test_lens_table_refuses_a_choice_that_mass_did_not_fit(lens_folders, reference):
+    folder = lens_folders[0].parent
+    write_choice(folder, chosen_label="X6+point")
+    with pytest.raises(ValueError, match=r"MASS fitted X2\+point but model_choice.json chose "
+                                         r"X6\+point; rerun choose_light and MASS"):  # fmt: skip
+        lens_table(lens_folders, reference)
+    (folder / "model_choice.json").write_text('{"chosen": "X2+point"}')
+    with pytest.raises(ValueError, match=r"model_choice.json: not a model-choice record"):
+        lens_table(lens_folders, reference)
+
+
 def test_lens_table_names_missing_fit_files(lens_folders, reference):
     (lens_folders[0].parent / "quality.json").unlink()
     with pytest.raises(ValueError, match=r"slacs0029-0055: .*quality.json not found"):
@@ -292,7 +345,12 @@ def test_summary_command(tmp_path, lens_folders, reference, capsys):
     figures = {name: out / f"{name}.png" for name in ("out-figure", "out-einstein", "out-mosaic")}
     arguments = ["summary", *map(str, lens_folders), "--out-table", str(out / "lenses.csv")]
     arguments += [f"--{name}={path}" for name, path in figures.items()]
+    write_choice(lens_folders[0].parent)
+    arguments += ["--out-light-models", str(out / "light_models.csv")]
     assert main([*arguments, "--reference-dir", str(reference)]) == 0
+    candidates = pd.read_csv(out / "light_models.csv")
+    assert list(candidates["candidate"]) == [c[0] for c in CANDIDATES]
+    assert list(candidates["chosen"]) == [True, False, False]
     table = pd.read_csv(out / "lenses.csv")
     assert list(table["lens"]) == sorted(FITS)
     assert list(table["quality_flag"].astype("boolean")) == [pd.NA, False, True]
@@ -302,6 +360,7 @@ def test_summary_command(tmp_path, lens_folders, reference, capsys):
     assert "lenses: 3 (3 with isophotes)" in printed
     assert "complex_fraction: 0.000" in printed
     assert "quality_flagged: 1 of 2 measured" in printed
+    assert "light_models_chosen: {'X2+point': 1} (1 by evidence)" in printed
     assert "theta_e_lt_vs_bolton: slope" in printed
     assert "(2 lenses)" in printed
     assert main([*arguments, "--reference-dir", str(tmp_path / "absent")]) == 0

@@ -543,6 +543,8 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert fits.getdata(lens / "lens_light.fits").shape == (141, 141)
     table = pd.read_csv(tmp_path / "results" / "summary" / "lenses.csv")
     assert list(table["lens"]) == ["M1"]
+    assert list(table["light_chosen_by"]) == ["sheet"]  # the sheet pins X2 without point set
+    assert pd.read_csv(tmp_path / "results" / "summary" / "light_models.csv").empty
     assert (tmp_path / "results" / "summary" / "histograms.png").stat().st_size > 10_000
     assert (lens / "figures" / "overview.png").stat().st_size > 10_000
     recovery = json.loads((lens / "recovery.json").read_text())

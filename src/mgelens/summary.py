@@ -39,6 +39,11 @@ mass_critical_curve_*           tangential critical curve: q, angle (deg), θ_ef
 source                          the isophote summary file
 light_model                     MASS lens light: "X<n>" n MGE sets, "+point" with the point
                                 set; "<n>xSersic" for Sérsics
+light_chosen_by                 ``evidence`` (LIGHT candidates compared, ``model_choice.json``
+                                next to the summary) or ``sheet`` (the sheet pins the model)
+light_evidence_margin           ln Z of the chosen candidate minus the highest ln Z of the
+                                others (NaN when pinned; negative when a simpler model
+                                within the threshold was taken)
 theta_e                         θ_E^AG (arcsec), MASS posterior median
 theta_e_err_lo, theta_e_err_hi  its 1σ (68.27 %) errors: median − lower, upper − median
 theta_e_lt                      θ_E^LT = θ_E^AG √q (2/(1+q))^{1/(γ−1)}, arcsec (SPEC §3.3),
@@ -67,6 +72,12 @@ mass_light_offset               distance of the MASS model's mass centre from th
 
 Published columns are NaN for lenses absent from a table, and all NaN (with a logged
 warning) when the reference folder is absent.
+
+:func:`light_model_table` lists every LIGHT candidate of the lenses whose model was
+chosen by evidence (``results/summary/light_models.csv``), one row per lens and
+candidate: :data:`LIGHT_MODEL_COLUMNS`, with ``log_evidence`` the sampler's ln Z and
+``chi_squared``, ``n_linear`` (lens-light amplitudes + source pixels) and ``n_free`` those
+of the candidate's fit (:class:`mgelens.pipeline.model_choice.Candidate`).
 """
 
 import json
@@ -80,6 +91,7 @@ import pandas as pd
 
 from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.isophotes import IsophoteStatistics, MassShape
+from mgelens.pipeline.model_choice import CHOICE_FILE
 from mgelens.pipeline.records import PhaseInputError, light_components, read_fit_record
 from mgelens.published import posterior_einstein_radius, published_values
 from mgelens.search.results import SAMPLES_FILE
@@ -109,6 +121,8 @@ TABLE_COLUMNS = (
 """Columns of :func:`sample_table` (mass columns NaN when a summary has no mass model)."""
 FIT_COLUMNS = (
     "light_model",
+    "light_chosen_by",
+    "light_evidence_margin",
     *(f"{name}{suffix}" for name in ("theta_e", "theta_e_lt", "slope")
       for suffix in ("", "_err_lo", "_err_hi")),
     "bolton_b_sie",
@@ -128,6 +142,18 @@ FIT_COLUMNS = (
 """Columns :func:`lens_table` adds to :data:`TABLE_COLUMNS`."""
 QUALITY_FILE = "quality.json"
 MASS_PHASE = "mass"
+LIGHT_MODEL_COLUMNS = (
+    "lens",
+    "candidate",
+    "log_evidence",
+    "log_evidence_error",
+    "chi_squared",
+    "n_linear",
+    "n_free",
+    "converged",
+    "chosen",
+)
+"""Columns of :func:`light_model_table`."""
 
 
 def lens_summary(
@@ -235,6 +261,74 @@ def light_model_label(record: dict) -> str:
     return f"X{extended}" + ("+point" if point else "")
 
 
+def read_model_choice(lens_folder: Path) -> dict | None:
+    """The lens folder's ``model_choice.json`` (None if its LIGHT model is pinned).
+
+    Raises
+    ------
+    ValueError
+        If the record is not JSON or lacks ``chosen`` or ``candidates``.
+    """
+    path = lens_folder / CHOICE_FILE
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text())
+        chosen = record["chosen"]
+        labels = [c["label"] for c in record["candidates"]]
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise ValueError(
+            f"{path}: not a model-choice record ({exc!r}); rerun choose_light"
+        ) from exc
+    if chosen not in labels:
+        raise ValueError(f"{path}: chosen {chosen!r} is not one of its candidates {labels}")
+    return record
+
+
+def _choice_columns(lens_folder: Path, mass_record: dict) -> dict:
+    """``light_chosen_by`` and ``light_evidence_margin`` of one lens; checks that MASS ran
+    on the chosen candidate's light."""
+    choice = read_model_choice(lens_folder)
+    if choice is None:
+        return {"light_chosen_by": "sheet", "light_evidence_margin": math.nan}
+    fitted = light_model_label(mass_record)
+    if fitted != choice["chosen"]:
+        raise ValueError(
+            f"{lens_folder}: MASS fitted {fitted} but {CHOICE_FILE} chose {choice['chosen']}; "
+            "rerun choose_light and MASS"
+        )
+    evidence = {c["label"]: float(c["log_evidence"]) for c in choice["candidates"]}
+    chosen = evidence.pop(choice["chosen"])
+    margin = chosen - max(evidence.values()) if evidence else math.nan
+    return {"light_chosen_by": "evidence", "light_evidence_margin": margin}
+
+
+def light_model_table(lens_folders: Iterable[tuple[str, str | os.PathLike]]) -> pd.DataFrame:
+    """Every LIGHT candidate of the ``(lens, results folder)`` pairs whose model was chosen
+    by evidence, one row each (:data:`LIGHT_MODEL_COLUMNS`; module docstring).
+
+    Raises
+    ------
+    ValueError
+        As :func:`read_model_choice`.
+    """
+    rows = []
+    for lens, folder in lens_folders:
+        choice = read_model_choice(Path(folder))
+        if choice is None:
+            continue
+        for candidate in choice["candidates"]:
+            rows.append(
+                {
+                    "lens": lens,
+                    "candidate": candidate["label"],
+                    **{name: candidate[name] for name in LIGHT_MODEL_COLUMNS[2:-1]},
+                    "chosen": candidate["label"] == choice["chosen"],
+                }
+            )
+    return pd.DataFrame(rows, columns=list(LIGHT_MODEL_COLUMNS))
+
+
 def _fit_row(lens_folder: Path) -> dict:
     """The fit columns of one lens (not the published ones)."""
     mass = lens_folder / MASS_PHASE
@@ -242,7 +336,7 @@ def _fit_row(lens_folder: Path) -> dict:
         record = read_fit_record(mass)
         posterior = posterior_einstein_radius(pd.read_csv(mass / SAMPLES_FILE))
         quality = json.loads((lens_folder / QUALITY_FILE).read_text())
-        row = {"light_model": light_model_label(record)}
+        row = {"light_model": light_model_label(record), **_choice_columns(lens_folder, record)}
         for name in ("theta_e", "theta_e_lt", "slope"):
             median = posterior[name]
             row[name] = median

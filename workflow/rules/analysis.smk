@@ -76,6 +76,7 @@ rule summary:
             caption="../report/residual_mosaic.rst",
             category="Sample",
         ),
+        light_models="results/summary/light_models.csv",
     log:
         "logs/summary.log",
     benchmark:
@@ -92,7 +93,8 @@ rule summary:
     shell:
         "mgelens summary {input.summaries:q} --reference-dir {params.reference_dir:q} "
         "--out-table {output.table:q} --out-figure {output.figure:q} "
-        "--out-einstein {output.einstein:q} --out-mosaic {output.mosaic:q} > {log:q} 2>&1"
+        "--out-einstein {output.einstein:q} --out-mosaic {output.mosaic:q} "
+        "--out-light-models {output.light_models:q} > {log:q} 2>&1"
 
 
 rule recovery:

@@ -236,12 +236,13 @@ def quality_inputs(wildcards) -> dict:
 
 
 def summary_inputs(wildcards) -> dict:
-    """Everything the sample summary reads per lens (isophote summary, quality record, MASS
-    result, samples and model) and the published tables that exist (:func:`reference_tables`)."""
+    """Everything the sample summary reads per lens (isophote summary, quality record, LIGHT
+    model choice, MASS result, samples and model) and the published tables that exist (:func:`reference_tables`)."""
     lenses = list(LENSES.index)
     return {
         "summaries": isophote_summaries(wildcards),
         "quality": [f"results/{lens}/quality.json" for lens in lenses],
+        "choices": [f"results/{lens}/model_choice.json" for lens in CHOSEN_LIGHT_LENSES],
         "mass": [
             f"results/{lens}/mass/{name}"
             for lens in lenses
@@ -330,7 +331,13 @@ def all_targets() -> list[str]:
         targets.append("results/summary/smoothness.png")
     if PAPER_MOCK_FITS:
         targets.append("results/summary/mock_table.csv")
-    summary = ("lenses.csv", "histograms.png", "einstein_radii.png", "residual_mosaic.png")
+    summary = (
+        "lenses.csv",
+        "light_models.csv",
+        "histograms.png",
+        "einstein_radii.png",
+        "residual_mosaic.png",
+    )
     return targets + [f"results/summary/{name}" for name in summary]
 
 

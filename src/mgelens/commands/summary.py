@@ -5,11 +5,15 @@ Example::
     mgelens summary results/*/isophotes.json --reference-dir ../shared/data/reference \\
         --out-table results/summary/lenses.csv --out-figure results/summary/histograms.png \\
         --out-einstein results/summary/einstein_radii.png \\
-        --out-mosaic results/summary/residual_mosaic.png
+        --out-mosaic results/summary/residual_mosaic.png \\
+        --out-light-models results/summary/light_models.csv
 
 Each ``results/<lens>/isophotes.json`` comes with ``results/<lens>/quality.json`` and
 ``results/<lens>/mass/`` (``result.json``, ``samples.csv``, ``model.fits``), which the
-table's fit columns and the mosaic read (:func:`mgelens.summary.lens_table`). Prints the
+table's fit columns and the mosaic read (:func:`mgelens.summary.lens_table`), and, for a
+lens whose LIGHT model was chosen by evidence, ``results/<lens>/model_choice.json``
+(every candidate into ``--out-light-models``, :func:`mgelens.summary.light_model_table`).
+Prints the
 fraction of lenses with Δq_max > 0.1 or ΔPA_max > 10° (thresholds adjustable), the number
 of flagged fits and the slopes of our θ_E^LT against the published values.
 """
@@ -33,6 +37,7 @@ from mgelens.summary import (
     QUALITY_FILE,
     complex_fraction,
     lens_table,
+    light_model_table,
 )
 
 logger = logging.getLogger(__name__)
@@ -55,6 +60,11 @@ def register(subparsers) -> None:
     )
     parser.add_argument(
         "--out-mosaic", type=Path, required=True, help="residual mosaic with quality flags (PNG)"
+    )
+    parser.add_argument(
+        "--out-light-models",
+        type=Path,
+        help="every LIGHT candidate of the lenses whose model was chosen by evidence (CSV)",
     )
     parser.add_argument(
         "--reference-dir",
@@ -88,11 +98,18 @@ def run(args: argparse.Namespace) -> int:
                 index=False
             )
         ]
+        candidates = light_model_table(
+            (lens, Path(source).parent)
+            for lens, source in table[["lens", "source"]].itertuples(index=False)
+        )
     except (OSError, KeyError, ValueError) as exc:
         logger.error("%s", exc)
         return 1
     with atomic_path(args.out_table) as temporary:
         table.to_csv(temporary, index=False)
+    if args.out_light_models is not None:
+        with atomic_path(args.out_light_models) as temporary:
+            candidates.to_csv(temporary, index=False)
     save_png(histogram_figure(table, args.delta_q, args.delta_pa), args.out_figure)
     save_png(einstein_radius_figure(table), args.out_einstein)
     save_png(residual_mosaic(panels), args.out_mosaic)
@@ -103,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
         f"complex_fraction: {fraction:.3f} (delta_q > {args.delta_q:g} or "
         f"delta_pa > {args.delta_pa:g} deg)"
     )
+    chosen = table.loc[table["light_chosen_by"] == "evidence", "light_model"]
+    print(f"light_models_chosen: {chosen.value_counts().to_dict()} ({len(chosen)} by evidence)")
     flags = table["quality_flag"]
     print(f"quality_flagged: {int(flags.sum())} of {int(flags.notna().sum())} measured")
     for name, column in (("bolton", "bolton_b_sie"), ("shajib", "shajib_theta_e")):

@@ -176,13 +176,18 @@ def adopt(
                 shutil.copyfile(source / name, temporary)
     write_json(
         results_dir / CHOICE_FILE if record_path is None else record_path,
-        {
-            "chosen": chosen.label,
-            "criterion": "log_evidence",
-            "threshold": threshold,
-            "rule": "the candidate with the fewest linear unknowns (then free parameters) "
-            "whose ln Z is within `threshold` of the highest ln Z",
-            "candidates": [asdict(c) for c in found],
-        },
+        choice_record(found, chosen, threshold),
     )
     return chosen
+
+
+def choice_record(found: Sequence[Candidate], chosen: Candidate, threshold: float) -> dict:
+    """The ``model_choice.json`` record (module docstring) of ``chosen`` among ``found``."""
+    return {
+        "chosen": chosen.label,
+        "criterion": "log_evidence",
+        "threshold": threshold,
+        "rule": "the candidate with the fewest linear unknowns (then free parameters) "
+        "whose ln Z is within `threshold` of the highest ln Z",
+        "candidates": [asdict(c) for c in found],
+    }
