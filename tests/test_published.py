@@ -118,3 +118,8 @@ def test_slope_through_origin_recovers_a_known_line():
     assert exact == (0.5, 0.0, 2)
     assert math.isnan(published.slope_through_origin([], [])[0])
     assert math.isnan(published.slope_through_origin([2.0], [1.0])[1])
+
+
+def test_slope_text_drops_an_undefined_error_and_counts_in_the_singular():
+    assert published.slope_text(0.8747, 0.0803, 5) == "a = 0.875 ± 0.080 (5 lenses)"
+    assert published.slope_text(0.9943, math.nan, 1) == "a = 0.994 (1 lens)"

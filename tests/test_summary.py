@@ -299,8 +299,19 @@ def test_einstein_radius_figure(lens_folders, reference, tmp_path):
     bolton, shajib = figure.axes
     texts = [t.get_text() for t in bolton.texts]
     assert any(t.startswith("y = a·x: a = ") and "(2 lenses)" in t for t in texts)
-    assert any("(1 lenses)" in t for t in (t.get_text() for t in shajib.texts))
+    shajib_texts = [t.get_text() for t in shajib.texts]
+    assert any(t.endswith("(1 lens)") and "±" not in t for t in shajib_texts)
     assert "slacs0029-0055" not in texts  # 1.6 % off Bolton: not named
+    legend = [t.get_text() for t in bolton.get_legend().get_texts()]
+    assert "residuals flagged" in legend
+    assert "lensing flagged" not in legend
+    table.loc[table["lens"] == "slacs0029-0055", "lensing_flag"] = True
+    bolton = einstein_radius_figure(table).axes[0]
+    boxed = [line for line in bolton.lines if line.get_label() == "lensing flagged"]
+    assert len(boxed) == 1
+    assert boxed[0].get_marker() == "s"
+    sie = table.set_index("lens").loc["slacs0029-0055"]
+    np.testing.assert_allclose(boxed[0].get_xydata(), [[sie["bolton_b_sie"], sie["theta_e_lt"]]])
     save_png(figure, tmp_path / "einstein.png")
     empty = einstein_radius_figure(table[table["lens"] == "M1"])
     for ax in empty.axes:
@@ -361,7 +372,8 @@ def test_summary_command(tmp_path, lens_folders, reference, capsys):
     assert "complex_fraction: 0.000" in printed
     assert "quality_flagged: 1 of 2 measured" in printed
     assert "light_models_chosen: {'X2+point': 1} (1 by evidence)" in printed
-    assert "theta_e_lt_vs_bolton: slope" in printed
+    assert "theta_e_lt_vs_bolton: a = " in printed
+    assert "theta_e_lt_vs_shajib: a = 0.958 (1 lens)" in printed
     assert "(2 lenses)" in printed
     assert main([*arguments, "--reference-dir", str(tmp_path / "absent")]) == 0
     assert pd.read_csv(out / "lenses.csv")["bolton_b_sie"].isna().all()

@@ -180,3 +180,10 @@ def slope_through_origin(x, y) -> tuple[float, float, int]:
         return slope, math.nan, n
     scatter = np.sum((y - slope * x) ** 2) / (n - 1)
     return slope, float(np.sqrt(scatter / np.sum(x * x))), n
+
+
+def slope_text(slope: float, error: float, n: int) -> str:
+    """``"a = 0.875 ± 0.080 (5 lenses)"``; without ``±`` when the error is undefined
+    (one lens), ``"1 lens"`` in the singular."""
+    spread = f" ± {error:.3f}" if math.isfinite(error) else ""
+    return f"a = {slope:.3f}{spread} ({n} {'lens' if n == 1 else 'lenses'})"

@@ -29,7 +29,7 @@ from mgelens.plot import save_png
 from mgelens.plot.comparison import einstein_radius_figure
 from mgelens.plot.mosaic import read_panel, residual_mosaic
 from mgelens.plot.summary import histogram_figure
-from mgelens.published import slope_through_origin
+from mgelens.published import slope_text, slope_through_origin
 from mgelens.summary import (
     DELTA_PA_THRESHOLD,
     DELTA_Q_THRESHOLD,
@@ -125,6 +125,6 @@ def run(args: argparse.Namespace) -> int:
     flags = table["quality_flag"]
     print(f"quality_flagged: {int(flags.sum())} of {int(flags.notna().sum())} measured")
     for name, column in (("bolton", "bolton_b_sie"), ("shajib", "shajib_theta_e")):
-        slope, error, n = slope_through_origin(table[column], table["theta_e_lt"])
-        print(f"theta_e_lt_vs_{name}: slope {slope:.4f} +- {error:.4f} ({n} lenses)")
+        fit = slope_through_origin(table[column], table["theta_e_lt"])
+        print(f"theta_e_lt_vs_{name}: {slope_text(*fit)}")
     return 0

@@ -3,8 +3,9 @@
 Two panels of a :func:`mgelens.summary.lens_table`: our θ_E^LT (MASS posterior median with
 1σ errors, converted from θ_E^AG) against Bolton et al. 2008's b_SIE, and against Shajib et
 al. 2021's imaging-only power-law θ_E (with their 1σ errors). Each panel has the 1:1 line,
-a ±5 % band, the names of lenses off by more than 10 %, flagged fits (``quality_flag``)
-circled in red, and the least-squares slope of
+a ±5 % band, the names of lenses off by more than 10 %, fits flagged by the residuals
+(``quality_flag``) circled in red and by the lensing check (``lensing_flag``) boxed in
+orange, and the least-squares slope of
 y = a·x (:func:`mgelens.published.slope_through_origin`). A panel without published values
 says so.
 """
@@ -14,12 +15,17 @@ import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from mgelens.published import slope_through_origin
+from mgelens.published import slope_text, slope_through_origin
 
 BAND = 0.05
 """Half-width of the shaded band about 1:1 (fraction)."""
 OUTLIER = 0.10
 """Relative difference beyond which a lens is named."""
+FLAG_MARKERS = (
+    ("quality_flag", "o", "tab:red", "residuals flagged"),
+    ("lensing_flag", "s", "tab:orange", "lensing flagged"),
+)
+"""(table column, marker, colour, legend label) of the flagged fits' outlines."""
 PANELS = (
     ("bolton_b_sie", None, r"Bolton et al. 2008 $b_{\rm SIE}$ [arcsec]"),
     (
@@ -47,20 +53,18 @@ def _panel(ax: Axes, table: pd.DataFrame, column: str, errors: str | None, label
         xerr = rows[[f"{errors}_err_lo", f"{errors}_err_hi"]].to_numpy(float).T
     yerr = rows[["theta_e_lt_err_lo", "theta_e_lt_err_hi"]].to_numpy(float).T
     ax.errorbar(x, y, xerr=xerr, yerr=yerr, fmt="o", markersize=4, color="tab:blue")
-    if "quality_flag" in rows:
-        flagged = rows["quality_flag"].fillna(False).to_numpy(bool)
-        if flagged.any():
-            ax.plot(
-                x[flagged], y[flagged], "o", mfc="none", mec="tab:red", ms=9, label="flagged fit"
-            )
+    for flag, marker, colour, name in FLAG_MARKERS:
+        if flag in rows:
+            flagged = rows[flag].fillna(False).to_numpy(bool)
+            if flagged.any():
+                ax.plot(x[flagged], y[flagged], marker, mfc="none", mec=colour, ms=9, label=name)
     for lens, xi, yi in zip(rows["lens"], x, y, strict=True):
         if abs(yi / xi - 1.0) > OUTLIER:
             ax.annotate(lens, (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7)
-    slope, error, n = slope_through_origin(x, y)
     ax.text(
         0.04,
         0.96,
-        f"y = a·x: a = {slope:.3f} ± {error:.3f} ({n} lenses)",
+        f"y = a·x: {slope_text(*slope_through_origin(x, y))}",
         transform=ax.transAxes,
         va="top",
         fontsize=9,
@@ -68,7 +72,8 @@ def _panel(ax: Axes, table: pd.DataFrame, column: str, errors: str | None, label
     ax.set_xlim(lo, hi)
     ax.set_ylim(lo, hi)
     ax.set_aspect("equal")
-    ax.legend(loc="lower right", fontsize=8)
+    # upper left, under the slope: above the band, where only overestimates would lie
+    ax.legend(loc="upper left", bbox_to_anchor=(0.02, 0.91), fontsize=8)
 
 
 def einstein_radius_figure(table: pd.DataFrame) -> Figure:
