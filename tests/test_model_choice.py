@@ -18,6 +18,7 @@ from mgelens.pipeline.model_choice import (
     adopt,
     candidates,
     choose,
+    holds_choice,
 )
 from mgelens.pipeline.phases import mass as mass_phase
 from mgelens.pipeline.settings import LensSpec, SettingsError, settings_from_mapping
@@ -170,6 +171,9 @@ def test_adopt_copies_the_chosen_candidate_and_mass_reads_it(candidate_run, mock
     folder = results / LightModel.from_label(chosen.label).folder
     for name in ("result.json", "samples.csv", "model.fits", "phase.log"):
         assert (results / "light" / name).read_bytes() == (folder / name).read_bytes()
+    other = next(m.label for m in models if m.label != chosen.label)
+    assert holds_choice(results, chosen.label)
+    assert not holds_choice(results, other)
     # MASS fixes the lens light of light/, the chosen candidate's
     problem = mass_phase.problem(mock_dir, results, capped_settings(), LENS)
     names = {spec.name for spec in problem.model.lens_light}

@@ -11,7 +11,7 @@ from astropy.io import fits
 from mgelens.atomic import write_json
 from mgelens.cli import main
 from mgelens.isophotes import IsophoteStatistics, MassShape
-from mgelens.pipeline.model_choice import Candidate, choice_record, choose
+from mgelens.pipeline.model_choice import Candidate, LightModel, choice_record, choose
 from mgelens.plot import save_png
 from mgelens.plot.comparison import einstein_radius_figure
 from mgelens.plot.mosaic import read_panel, residual_mosaic
@@ -247,12 +247,17 @@ CANDIDATES = (
 
 def write_choice(folder, chosen_label=None):
     """folder/model_choice.json as rule choose_light writes it, over :data:`CANDIDATES`
-    (the choice by :func:`choose` unless ``chosen_label`` overrides it)."""
+    (the choice by :func:`choose` unless ``chosen_label`` overrides it), with each
+    candidate's result.json and the chosen one's adopted as light/result.json."""
     found = [Candidate(label, ln_z, 0.3, ln_z + 1, ln_z + 50, chi2, n_linear, n_free, True)
              for label, ln_z, chi2, n_linear, n_free in CANDIDATES]  # fmt: skip
     chosen = choose(found, 5.0)
     if chosen_label is not None:
         chosen = next(c for c in found if c.label == chosen_label)
+    for candidate in found:
+        folder_name = LightModel.from_label(candidate.label).folder
+        write_json(folder / folder_name / "result.json", {"candidate": candidate.label})
+    write_json(folder / "light" / "result.json", {"candidate": chosen.label})
     write_json(folder / "model_choice.json", choice_record(found, chosen, 5.0))
 
 
@@ -274,6 +279,18 @@ def test_lens_table_reads_the_evidence_choice(lens_folders, reference):
         assert (row["log_evidence"], row["chi_squared"]) == (ln_z, chi2)
         assert (row["n_linear"], row["n_free"], row["converged"]) == (n_linear, n_free, True)
         assert row["chosen"] == (label == "X2+point")
+
+
+def test_a_choice_that_light_no_longer_holds_is_ignored(lens_folders, reference, caplog):
+    """After the sheet pins the model, LIGHT's own fit replaces the adopted candidate."""
+    folder = lens_folders[0].parent
+    write_choice(folder, chosen_label="X6+point")  # MASS fitted X2+point, pinned since
+    write_json(folder / "light" / "result.json", {"pinned": "X2+point"})
+    table = lens_table(lens_folders, reference).set_index("lens")
+    assert table.loc["slacs0029-0055", "light_chosen_by"] == "sheet"
+    assert math.isnan(table.loc["slacs0029-0055", "light_evidence_margin"])
+    assert "does not hold its chosen candidate X6+point" in caplog.text
+    assert light_model_table([("slacs0029-0055", folder)]).empty
 
 
 def test_lens_table_refuses_a_choice_that_mass_did_not_fit(lens_folders, reference):

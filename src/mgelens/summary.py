@@ -81,6 +81,7 @@ of the candidate's fit (:class:`mgelens.pipeline.model_choice.Candidate`).
 """
 
 import json
+import logging
 import math
 import os
 from collections.abc import Iterable
@@ -91,10 +92,12 @@ import pandas as pd
 
 from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.isophotes import IsophoteStatistics, MassShape
-from mgelens.pipeline.model_choice import CHOICE_FILE
+from mgelens.pipeline.model_choice import CHOICE_FILE, holds_choice
 from mgelens.pipeline.records import PhaseInputError, light_components, read_fit_record
 from mgelens.published import posterior_einstein_radius, published_values
 from mgelens.search.results import SAMPLES_FILE
+
+logger = logging.getLogger(__name__)
 
 DELTA_Q_THRESHOLD = 0.1
 DELTA_PA_THRESHOLD = 10.0
@@ -262,7 +265,9 @@ def light_model_label(record: dict) -> str:
 
 
 def read_model_choice(lens_folder: Path) -> dict | None:
-    """The lens folder's ``model_choice.json`` (None if its LIGHT model is pinned).
+    """The lens folder's ``model_choice.json``; None if its LIGHT model is pinned: no such
+    file, or one that ``light/`` no longer follows (:func:`holds_choice`; a warning is
+    logged).
 
     Raises
     ------
@@ -282,6 +287,14 @@ def read_model_choice(lens_folder: Path) -> dict | None:
         ) from exc
     if chosen not in labels:
         raise ValueError(f"{path}: chosen {chosen!r} is not one of its candidates {labels}")
+    if not holds_choice(lens_folder, chosen):
+        logger.warning(
+            "%s: ignored, light/ does not hold its chosen candidate %s (the sheet pins the "
+            "model since); delete it",
+            path,
+            chosen,
+        )
+        return None
     return record
 
 

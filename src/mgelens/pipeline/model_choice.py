@@ -181,6 +181,22 @@ def adopt(
     return chosen
 
 
+def holds_choice(results_dir: str | Path, chosen_label: str) -> bool:
+    """Whether ``results_dir/light/`` still holds the candidate ``chosen_label`` that
+    :func:`adopt` copied there (its ``result.json`` byte-identical to the candidate's).
+
+    False when LIGHT has since been fitted with a model the sheet pins (the earlier
+    ``model_choice.json`` then describes a choice MASS no longer reads), or when either
+    file is missing.
+    """
+    results_dir = Path(results_dir)
+    adopted = results_dir / "light" / RESULT_FILE
+    candidate = results_dir / LightModel.from_label(chosen_label).folder / RESULT_FILE
+    if not (adopted.is_file() and candidate.is_file()):
+        return False
+    return adopted.read_bytes() == candidate.read_bytes()
+
+
 def choice_record(found: Sequence[Candidate], chosen: Candidate, threshold: float) -> dict:
     """The ``model_choice.json`` record (module docstring) of ``chosen`` among ``found``."""
     return {
