@@ -112,6 +112,9 @@ def test_histogram_figure_is_written_atomically(tmp_path, summaries):
     assert "paper ≈ 40 % of 35" in figure.get_suptitle()
     # |a₄/a| 0.037, 0.026, 0.011, 0.004, 0.015 (and one lens without isophotes)
     assert figure.axes[2].get_title() == "max |a₄/a| < 0.02: 3/5 (paper 32/35)"
+    for ax in figure.axes:  # counts of lenses: whole-number ticks
+        ticks = [tick for tick in ax.get_yticks() if ax.get_ylim()[0] <= tick <= ax.get_ylim()[1]]
+        assert ticks == [round(tick) for tick in ticks]
     path = tmp_path / "plots" / "histograms.png"
     save_png(figure, path)
     assert path.read_bytes()[:8] == PNG_SIGNATURE

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from mgelens.summary import DELTA_PA_THRESHOLD, DELTA_Q_THRESHOLD, complex_fraction
 
@@ -38,6 +39,7 @@ def _histogram(ax: Axes, values: np.ndarray, label: str, threshold: float | None
         ax.axvline(threshold, color="tab:red", linestyle="--", linewidth=1.0)
     ax.set_xlabel(label)
     ax.set_ylabel("lenses")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts
 
 
 def histogram_figure(
