@@ -13,9 +13,9 @@ Each ``results/<lens>/isophotes.json`` comes with ``results/<lens>/quality.json`
 table's fit columns and the mosaic read (:func:`mgelens.summary.lens_table`), and, for a
 lens whose LIGHT model was chosen by evidence, ``results/<lens>/model_choice.json``
 (every candidate into ``--out-light-models``, :func:`mgelens.summary.light_model_table`).
-Prints the
-fraction of lenses with Δq_max > 0.1 or ΔPA_max > 10° (thresholds adjustable), the number
-of flagged fits and the slopes of our θ_E^LT against the published values.
+Prints the fraction of lenses with Δq_max > 0.1 or ΔPA_max > 10° (thresholds
+adjustable), the models chosen by evidence, the number of flagged fits and the slopes of
+our θ_E^LT against the published values.
 """
 
 import argparse
