@@ -98,9 +98,10 @@ def run(args: argparse.Namespace) -> int:
                 index=False
             )
         ]
-        candidates = light_model_table(
+        chosen_by_evidence = table[table["light_chosen_by"] == "evidence"]
+        candidates = light_model_table(  # lens_table has read and checked these choices
             (lens, Path(source).parent)
-            for lens, source in table[["lens", "source"]].itertuples(index=False)
+            for lens, source in chosen_by_evidence[["lens", "source"]].itertuples(index=False)
         )
     except (OSError, KeyError, ValueError) as exc:
         logger.error("%s", exc)
@@ -120,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         f"complex_fraction: {fraction:.3f} (delta_q > {args.delta_q:g} or "
         f"delta_pa > {args.delta_pa:g} deg)"
     )
-    chosen = table.loc[table["light_chosen_by"] == "evidence", "light_model"]
+    chosen = chosen_by_evidence["light_model"]
     print(f"light_models_chosen: {chosen.value_counts().to_dict()} ({len(chosen)} by evidence)")
     flags = table["quality_flag"]
     print(f"quality_flagged: {int(flags.sum())} of {int(flags.notna().sum())} measured")
