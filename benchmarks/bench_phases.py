@@ -21,7 +21,8 @@ SPix2's nominal hyper-parameters. Stages:
 
 * ``lens_light_columns``, ``lens_light_blur``: the linear lens light's unit columns on
   their over-sampled grid, and their PSF convolution (SP and LIGHT; the SPix phases and
-  MASS cache them);
+  MASS cache them); ``lens_light_closed_form``: the wide Gaussians' blurred columns in
+  closed form (``FitSettings.lp_analytic_tolerance``);
 * ``source_mge_columns``, ``source_mge_blur``: SP's source-plane MGE seen through the lens;
 * ``ray_tracing``, ``border_relocation``, ``voronoi_mesh``, ``interpolation``,
   ``mapping_matrix``, ``regularization`` (with ln det H), ``kmeans`` (SPix2);
@@ -54,7 +55,13 @@ from mgelens.source.image_mesh import floored_adapt_image, overlay_centres
 
 STAGES = {
     # stage: [(file, function, caller as (file, function), or None for any caller)]
-    "lens_light_columns": [("light.py", "columns", ("light.py", "<listcomp>"))],
+    "lens_light_columns": [
+        ("light.py", "columns", ("light.py", "<listcomp>")),
+        ("light.py", "columns", ("light.py", "blurred_columns")),
+    ],
+    "lens_light_closed_form": [
+        ("analytic_blur.py", "blurred_gaussian_columns", ("light.py", "blurred_columns"))
+    ],
     "lens_light_blur": [("convolve.py", "blur_columns", ("light.py", "blurred_columns"))],
     "source_mge_columns": [("light.py", "columns", ("fit.py", "<listcomp>"))],
     "source_mge_blur": [("convolve.py", "blur_columns", ("fit.py", "source_light_columns"))],

@@ -11,8 +11,8 @@ SOURCE = Path(__file__).resolve().parents[1] / "src" / "mgelens"
 LAYERS = (
     ("foundation", ("mgelens", "_jit", "atomic", "threads", "memory", "values", "rejection",
                     "provenance", "sheet", "geometry", "grid")),
-    ("data", ("imaging", "imaging_input", "mask", "convolve")),
-    ("profiles", ("light", "mass")),
+    ("data", ("imaging", "imaging_input", "mask", "convolve", "kernel_cumulants")),
+    ("profiles", ("light", "mass", "analytic_blur")),
     ("source", ("source",)),
     ("inversion", ("inversion",)),
     ("fit", ("fit", "fit_settings")),

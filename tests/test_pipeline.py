@@ -375,6 +375,8 @@ def test_profiles_paper_and_quick():
     assert quick.positions_penalty
     assert not paper.positions_penalty
     assert (paper.fit.psf_trim, quick.fit.psf_trim) == (1e-10, 1e-4)
+    # quick: wide lens-light Gaussians in closed form (docs/benchmarks.md); paper: sub-grid
+    assert (paper.fit.lp_analytic_tolerance, quick.fit.lp_analytic_tolerance) == (0.0, 1e-4)
     assert (paper.fit.sub_size, quick.fit.sub_size) == (4, 2)
     # quick: the continuous edge rule (SPEC §4 deviations, docs/slam.md), MASS on two meshes
     assert (paper.fit.edge_rule, quick.fit.edge_rule) == ("anchor", "continuous")
@@ -387,12 +389,21 @@ def test_profiles_paper_and_quick():
 
 
 def test_fit_settings_reach_the_fit(mock_dir):
-    for trim, force_edge, rule in ((1e-10, True, "anchor"), (1e-4, False, "continuous")):
-        fit = {"psf_trim": trim, "force_edge_pixels_to_zero": force_edge, "edge_rule": rule}
+    for trim, force_edge, rule, analytic in (
+        (1e-10, True, "anchor", 0.0),
+        (1e-4, False, "continuous", 1e-4),
+    ):
+        fit = {
+            "psf_trim": trim,
+            "force_edge_pixels_to_zero": force_edge,
+            "edge_rule": rule,
+            "lp_analytic_tolerance": analytic,
+        }
         settings = settings_from_mapping({"fit": fit})
         dataset, _ = problem.load_dataset(mock_dir, settings, LENS, (0.0, 0.0))
         assert dataset.settings is settings.fit
         assert dataset.settings.psf_trim == trim
+        assert (dataset.light_grid.analytic_sigma < 1.0) is (analytic > 0)
         assert dataset.settings.force_edge_pixels_to_zero is force_edge
         assert dataset.settings.edge_rule == rule
 

@@ -18,6 +18,7 @@ import numpy as np
 from scipy import sparse
 
 from mgelens import mass as mass_module
+from mgelens.analytic_blur import smallest_analytic_sigma
 from mgelens.convolve import trimmed_psf
 from mgelens.fit_settings import FitSettings
 from mgelens.grid import SubGrid, pixel_centres, sub_grid, to_native
@@ -93,14 +94,18 @@ class FitDataset:
             raise ValueError(
                 f"{imaging.name or 'imaging'}: data must be finite and noise > 0 inside the mask"
             )
+        psf = trimmed_psf(imaging.psf, settings.psf_trim)
         light_grid = LightGrid.from_mask(
             mask,
-            trimmed_psf(imaging.psf, settings.psf_trim),
+            psf,
             imaging.pixel_scale,
             centre=light_centre,
             sub_size=settings.lp_sub_size,
             sub_size_centre=settings.lp_sub_size_centre,
             centre_radius=settings.lp_centre_radius,
+            analytic_sigma=smallest_analytic_sigma(
+                psf, imaging.pixel_scale, settings.lp_analytic_tolerance
+            ),
         )
         x, y = pixel_centres(mask.shape, imaging.pixel_scale)
         source_grid = sub_grid(x[used], y[used], imaging.pixel_scale, settings.sub_size)

@@ -51,6 +51,12 @@ class FitSettings:
         The PSF is cut to the smallest centred kernel holding every entry ≥ this fraction
         of its peak (:func:`mgelens.convolve.trimmed_psf`; 0 keeps it whole). The default
         1e−10 only removes wings that cannot change a model image.
+    lp_analytic_tolerance : float
+        Lens-light Gaussians whose minor-axis σ is wide enough that the closed-form
+        pixel-integrated, PSF-blurred column (:mod:`mgelens.analytic_blur`) is within this
+        fraction of the column's peak of the exact convolution, for this PSF, take that
+        route instead of the sub-grid and the convolution. 0 (default) keeps every column
+        on the sub-grid.
     """
 
     positive_only: bool = True
@@ -64,6 +70,7 @@ class FitSettings:
     force_edge_pixels_to_zero: bool = True
     edge_rule: str = "anchor"
     psf_trim: float = 1e-10
+    lp_analytic_tolerance: float = 0.0
 
     def __post_init__(self):
         """Check every field's type and range and store it in its canonical type; a
@@ -80,6 +87,13 @@ class FitSettings:
             "mge_diagonal": values.number("mge_diagonal", self.mge_diagonal, 0.0),
             "psf_trim": values.number(
                 "psf_trim", self.psf_trim, 0.0, maximum=1.0, open_maximum=True
+            ),
+            "lp_analytic_tolerance": values.number(
+                "lp_analytic_tolerance",
+                self.lp_analytic_tolerance,
+                0.0,
+                maximum=1.0,
+                open_maximum=True,
             ),
         }
         for name in ("sub_size", "lp_sub_size", "lp_sub_size_centre"):

@@ -15,7 +15,7 @@ mgefit / the paper quote the **major-axis** dispersion σ_p = σ/q
 (:meth:`Gaussian.from_major_axis`).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -26,6 +26,7 @@ from mgelens._jit import njit
 from mgelens.convolve import Convolver
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from, to_profile_frame
 from mgelens.grid import SubGrid, adaptive_sub_sizes, pixel_centres, sub_grid
+from mgelens.kernel_cumulants import KernelCumulants
 
 EXPONENT_CUTOFF = 40.0
 """Gaussian terms exp(−e) with e ≥ 40 are dropped: exp(−40) ≈ 4e−18 of a Gaussian's own peak,
@@ -380,6 +381,94 @@ def _sersic_column(x, y, starts, sub_sizes, xc, yc, q, phi, log_re, inv_n, b_n):
     return out
 
 
+def blurred_gaussian_columns(
+    x: np.ndarray,
+    y: np.ndarray,
+    centre: tuple[float, float],
+    ell_comps: tuple[float, float],
+    sigmas: np.ndarray,
+    cumulants: KernelCumulants,
+) -> np.ndarray:
+    """Unit-peak Gaussians of one geometry (``sigmas`` minor-axis, arcsec) blurred by the
+    kernel of ``cumulants`` at the points (``x``, ``y``) (arcsec), (n_points, n_sigmas),
+    by the fourth-order cumulant expansion of :mod:`mgelens.kernel_cumulants`."""
+    q, angle = axis_ratio_and_angle_from(ell_comps)
+    phi = np.deg2rad(angle)
+    rotation = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+    sigmas = np.asarray(sigmas, dtype=float)
+    variances = np.zeros((sigmas.size, 2, 2))
+    variances[:, 0, 0] = (sigmas / q) ** 2
+    variances[:, 1, 1] = sigmas**2
+    sigma_gaussian = rotation @ variances @ rotation.T
+    total = sigma_gaussian + cumulants.covariance
+    det_total = total[:, 0, 0] * total[:, 1, 1] - total[:, 0, 1] ** 2
+    p = np.empty_like(total)
+    p[:, 0, 0] = total[:, 1, 1] / det_total
+    p[:, 1, 1] = total[:, 0, 0] / det_total
+    p[:, 0, 1] = p[:, 1, 0] = -total[:, 0, 1] / det_total
+    amplitude = cumulants.total * np.sqrt((sigmas**2 / q) ** 2 / det_total)
+    k3, k4 = cumulants.third, cumulants.fourth
+    linear3 = 3.0 * np.einsum("ijk,gij->gk", k3, p)
+    quad = 6.0 * np.einsum("ijkl,gij->gkl", k4, p)
+    constant4 = 3.0 * np.einsum("gkl,gkl->g", np.einsum("ijkl,gij->gkl", k4, p), p)
+    out = np.empty((sigmas.size, np.size(x)))
+    _closed_form_columns(
+        np.ascontiguousarray(x, dtype=float),
+        np.ascontiguousarray(y, dtype=float),
+        float(centre[0] + cumulants.mean[0]),
+        float(centre[1] + cumulants.mean[1]),
+        np.stack([p[:, 0, 0], p[:, 0, 1], p[:, 1, 1]], axis=1),
+        np.array([k3[0, 0, 0], k3[0, 0, 1], k3[0, 1, 1], k3[1, 1, 1]]),
+        np.array([k4[0, 0, 0, 0], k4[0, 0, 0, 1], k4[0, 0, 1, 1], k4[0, 1, 1, 1], k4[1, 1, 1, 1]]),
+        linear3,
+        np.stack([quad[:, 0, 0], quad[:, 0, 1], quad[:, 1, 1]], axis=1),
+        constant4,
+        amplitude,
+        _EXP_TABLE,
+        out,
+    )
+    return out.T
+
+
+@njit(parallel=True, fastmath=True)
+def _closed_form_columns(
+    x, y, xc, yc, precision, third, fourth, linear3, quadratic4, constant4, amplitude, table, out
+):
+    """out[k, p]: column k of :func:`blurred_gaussian_columns` at point p; terms whose
+    exponent reaches :data:`EXPONENT_CUTOFF` are zero, as in :func:`_gaussian_columns`."""
+    n = x.size
+    for k in range(precision.shape[0]):
+        pxx, pxy, pyy = precision[k, 0], precision[k, 1], precision[k, 2]
+        for p in prange(n):
+            ux = x[p] - xc
+            uy = y[p] - yc
+            vx = pxx * ux + pxy * uy
+            vy = pxy * ux + pyy * uy
+            t3 = (
+                third[0] * vx * vx * vx
+                + 3.0 * third[1] * vx * vx * vy
+                + 3.0 * third[2] * vx * vy * vy
+                + third[3] * vy * vy * vy
+                - linear3[k, 0] * vx
+                - linear3[k, 1] * vy
+            )
+            t4 = (
+                fourth[0] * vx * vx * vx * vx
+                + 4.0 * fourth[1] * vx * vx * vx * vy
+                + 6.0 * fourth[2] * vx * vx * vy * vy
+                + 4.0 * fourth[3] * vx * vy * vy * vy
+                + fourth[4] * vy * vy * vy * vy
+                - quadratic4[k, 0] * vx * vx
+                - 2.0 * quadratic4[k, 1] * vx * vy
+                - quadratic4[k, 2] * vy * vy
+                + constant4[k]
+            )
+            exponent = 0.5 * (ux * vx + uy * vy)
+            inside = exponent < EXPONENT_CUTOFF
+            gaussian = _exp_negative(min(exponent, EXPONENT_CUTOFF), table) * inside
+            out[k, p] = amplitude[k] * gaussian * (1.0 + t3 / 6.0 + t4 / 24.0)
+
+
 def geometry_record(centre: tuple[float, float], ell_comps: tuple[float, float]) -> dict:
     """A light component's geometry as recorded: centre (arcsec), ell_comps, and the axis
     ratio and angle (degrees CCW from +x) they mean (SPEC §2.1)."""
@@ -412,10 +501,16 @@ class LightGrid:
     Light is evaluated on the mask ∪ blurring region with per-pixel sub-sizes
     (SPEC §1.3 DECISION: ``sub_size`` everywhere, ``sub_size_centre`` within
     ``centre_radius`` arcsec of ``centre``), binned, PSF-convolved and cut to the mask.
+    Gaussians of minor-axis σ ≥ ``analytic_sigma`` (arcsec) skip those steps: their
+    columns are the closed-form pixel-integrated, blurred Gaussians of
+    :mod:`mgelens.analytic_blur` at the mask's pixel centres (``outputs``).
     """
 
     convolver: Convolver
     grid: SubGrid
+    outputs: tuple[np.ndarray, np.ndarray] = field(repr=False)
+    cumulants: KernelCumulants = field(repr=False)
+    analytic_sigma: float = np.inf
 
     @classmethod
     def from_mask(
@@ -428,13 +523,22 @@ class LightGrid:
         sub_size_centre: int = 16,
         centre_radius: float = 0.3,
         origin: tuple[float, float] = (0.0, 0.0),
+        analytic_sigma: float = np.inf,
     ) -> "LightGrid":
+        """``analytic_sigma`` (arcsec): the smallest minor-axis σ whose columns take the
+        closed form (:func:`mgelens.analytic_blur.smallest_analytic_sigma`; inf: none)."""
         convolver = Convolver(mask, psf)
         x, y = pixel_centres(mask.shape, pixel_scale, origin)
         region = ~convolver.extended_mask
         xe, ye = x[region], y[region]
         sizes = adaptive_sub_sizes(xe, ye, centre, centre_radius, sub_size, sub_size_centre)
-        return cls(convolver=convolver, grid=sub_grid(xe, ye, pixel_scale, sizes))
+        return cls(
+            convolver=convolver,
+            grid=sub_grid(xe, ye, pixel_scale, sizes),
+            outputs=(x[~mask], y[~mask]),
+            cumulants=KernelCumulants.of_psf(convolver.psf, pixel_scale, pixel_box=True),
+            analytic_sigma=float(analytic_sigma),
+        )
 
     @cached_property
     def n_image_pixels(self) -> int:
@@ -443,10 +547,51 @@ class LightGrid:
     def blurred_columns(self, components: list) -> np.ndarray:
         """PSF-convolved unit-intensity columns of linear light components (MGE sets,
         Sérsics), (N_I, Σ n_columns), component by component."""
-        columns = np.concatenate([c.columns(self.grid) for c in components], axis=1)
-        return self.convolver.blur_columns(columns, include_blurring=True)
+        out = np.empty((self.n_image_pixels, sum(c.n_columns for c in components)))
+        on_grid, on_grid_at = [], []
+        start = 0
+        for component in components:
+            at = np.arange(start, start + component.n_columns)
+            start += component.n_columns
+            wide = self._wide(component)
+            if wide.any():
+                out[:, at[wide]] = blurred_gaussian_columns(
+                    *self.outputs,
+                    component.centre,
+                    component.ell_comps,
+                    component.sigmas[wide],
+                    self.cumulants,
+                )
+            if not wide.all():
+                narrow = component
+                if wide.any():
+                    narrow = replace(component, sigmas=component.sigmas[~wide])
+                on_grid.append(narrow.columns(self.grid))
+                on_grid_at.append(at[~wide])
+        if on_grid:
+            out[:, np.concatenate(on_grid_at)] = self.convolver.blur_columns(
+                np.concatenate(on_grid, axis=1), include_blurring=True
+            )
+        return out
+
+    def _wide(self, component) -> np.ndarray:
+        """Per column of ``component``: whether it takes the closed-form route."""
+        if isinstance(component, MGESet):
+            return component.sigmas >= self.analytic_sigma
+        return np.zeros(component.n_columns, dtype=bool)
 
     def blurred_image(self, profiles: list) -> np.ndarray:
-        """PSF-convolved image (N_I,) of profiles with an ``image(x, y)`` method."""
-        values = sum(p.image(self.grid.x, self.grid.y) for p in profiles)
-        return self.convolver.blur_columns(self.grid.bin(values), include_blurring=True)
+        """PSF-convolved image (N_I,) of profiles with an ``image(x, y)`` method, each
+        Gaussian by the route its column takes in :meth:`blurred_columns`."""
+        wide = [isinstance(p, Gaussian) and p.sigma >= self.analytic_sigma for p in profiles]
+        image = np.zeros(self.n_image_pixels)
+        narrow = [p for p, w in zip(profiles, wide, strict=True) if not w]
+        if narrow:
+            values = sum(p.image(self.grid.x, self.grid.y) for p in narrow)
+            image += self.convolver.blur_columns(self.grid.bin(values), include_blurring=True)
+        for profile in (p for p, w in zip(profiles, wide, strict=True) if w):
+            column = blurred_gaussian_columns(
+                *self.outputs, profile.centre, profile.ell_comps, [profile.sigma], self.cumulants
+            )
+            image += profile.intensity * column[:, 0]
+        return image

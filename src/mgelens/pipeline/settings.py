@@ -148,11 +148,14 @@ class SlamSettings:
         ``force_edge_pixels_to_zero`` and ``edge_rule`` (the anchor's rules, SPEC §4.2–4.4,
         or continuous ones under which the evidence is a continuous function of the mass
         parameters, with ``force_edge_pixels_to_zero`` off and ``adaptive_signals:
-        weighted``) and ``psf_trim``. Quick's ``psf_trim`` 1e−4 cuts the mock's 21×21
-        Gaussian PSF (σ = 1 pixel) to 9×9, losing 6e−6 of its flux, and leaves the SLACS
-        15×15 PSFs whole; its 2×2 source sub-grid (paper 4×4) makes a pixelized
-        evaluation about 20 % faster and leaves the MASS posterior as it was
-        (docs/design_notes.md, "Source sub-grid").
+        weighted``), ``psf_trim`` and ``lp_analytic_tolerance``. Quick's ``psf_trim`` 1e−4
+        cuts the mock's 21×21 Gaussian PSF (σ = 1 pixel) to 9×9, losing 6e−6 of its flux,
+        and leaves the SLACS 15×15 PSFs whole; its 2×2 source sub-grid (paper 4×4) makes a
+        pixelized evaluation about 20 % faster and leaves the MASS posterior as it was
+        (docs/design_notes.md, "Source sub-grid"); its ``lp_analytic_tolerance`` 1e−4 gives
+        the lens-light Gaussians wider than ≈0.4″ (HST PSFs) their closed-form blurred
+        columns, closer to the exact pixel integral than the 2×2 sub-grid they replace
+        (docs/benchmarks.md, "Wide Gaussians in closed form").
     samplers : mapping of phase name to SamplerSettings
         The non-linear search of each phase.
 
@@ -371,6 +374,7 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
                 lp_sub_size=2,
                 lp_sub_size_centre=8,
                 psf_trim=1e-4,
+                lp_analytic_tolerance=1e-4,
                 force_edge_pixels_to_zero=False,
                 edge_rule="continuous",
             ),
