@@ -60,7 +60,7 @@ STAGES = {
         ("light.py", "columns", ("light.py", "blurred_columns")),
     ],
     "lens_light_closed_form": [
-        ("analytic_blur.py", "blurred_gaussian_columns", ("light.py", "blurred_columns"))
+        ("light.py", "blurred_gaussian_columns", ("light.py", "blurred_columns"))
     ],
     "lens_light_blur": [("convolve.py", "blur_columns", ("light.py", "blurred_columns"))],
     "source_mge_columns": [("light.py", "columns", ("fit.py", "<listcomp>"))],

@@ -389,9 +389,12 @@ def blurred_gaussian_columns(
     sigmas: np.ndarray,
     cumulants: KernelCumulants,
 ) -> np.ndarray:
-    """Unit-peak Gaussians of one geometry (``sigmas`` minor-axis, arcsec) blurred by the
-    kernel of ``cumulants`` at the points (``x``, ``y``) (arcsec), (n_points, n_sigmas),
-    by the fourth-order cumulant expansion of :mod:`mgelens.kernel_cumulants`."""
+    """Unit-peak Gaussians of one geometry (``sigmas`` minor-axis, arcsec; the anchor form
+    of :class:`Gaussian`) convolved with the measure of ``cumulants`` (a PSF, with the
+    pixel box for pixel-integrated columns), at the points (``x``, ``y``) (arcsec):
+    (n_points, n_sigmas), by the fourth-order cumulant expansion of
+    :mod:`mgelens.kernel_cumulants`. Accurate for σ wide against the measure only
+    (:func:`mgelens.analytic_blur.smallest_analytic_sigma` says from where)."""
     q, angle = axis_ratio_and_angle_from(ell_comps)
     phi = np.deg2rad(angle)
     rotation = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
@@ -503,7 +506,8 @@ class LightGrid:
     ``centre_radius`` arcsec of ``centre``), binned, PSF-convolved and cut to the mask.
     Gaussians of minor-axis σ ≥ ``analytic_sigma`` (arcsec) skip those steps: their
     columns are the closed-form pixel-integrated, blurred Gaussians of
-    :mod:`mgelens.analytic_blur` at the mask's pixel centres (``outputs``).
+    :func:`blurred_gaussian_columns` at the mask's pixel centres (``outputs``), with the
+    PSF's and the pixel box's ``cumulants``.
     """
 
     convolver: Convolver
