@@ -76,6 +76,14 @@ def test_blur_columns_equals_masked_native_convolution(
         assert np.allclose(out[:, k], expected, atol=1e-13)
     single = conv.blur_columns(columns[:, 0], include_blurring, method)
     assert np.allclose(single, out[:, 0], atol=1e-14)
+    # into chosen columns of a wider array: the same columns there, the others untouched
+    wide = np.zeros((out.shape[0], 7))
+    wide[:, 3] = 5.0
+    at = np.array([6, 0, 4, 2])
+    assert conv.blur_columns(columns, include_blurring, method, out=wide, at=at) is wide
+    np.testing.assert_array_equal(wide[:, at], out)
+    assert np.all(wide[:, [1, 5]] == 0.0)
+    assert np.all(wide[:, 3] == 5.0)
 
 
 def test_transpose_blur_is_the_transpose_of_the_mask_operator(asymmetric_psf):

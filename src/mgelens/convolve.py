@@ -381,10 +381,10 @@ class _FFTGeometry:
             for shape, (picked, origins) in groups.items()
         }
 
-    def blur(self, columns: np.ndarray) -> np.ndarray:
-        """Blurred ``columns`` (n_in, n_col) at the outputs, (n_out, n_col)."""
+    def blur(self, columns: np.ndarray, out: np.ndarray, at: np.ndarray) -> None:
+        """Blur ``columns`` (n_in, n_col) into ``out[:, at]`` at the outputs (those columns
+        of ``out`` zero on entry: outputs beyond a cropped column's window keep it)."""
         columns = np.ascontiguousarray(columns)
-        out = np.zeros((self.n_out, columns.shape[1]))
         workers = numba.get_num_threads()  # the job's threads (mgelens.threads policy)
         for shape, (picked, origins) in self.windows(columns).items():
             stack = np.empty((picked.size, *shape))
@@ -393,8 +393,7 @@ class _FFTGeometry:
             spectrum = scipy.fft.rfft2(stack, workers=workers, overwrite_x=True)
             spectrum *= self._spectrum(shape)[None]
             full = scipy.fft.irfft2(spectrum, s=shape, workers=workers, overwrite_x=True)
-            _gather_columns(full, picked, origins, self.out_index, full_frame, out)
-        return out
+            _gather_columns(full, at[picked], origins, self.out_index, full_frame, out)
 
 
 @dataclass(frozen=True)
@@ -418,6 +417,11 @@ class Convolver:
     def __post_init__(self):
         object.__setattr__(self, "psf", check_psf(self.psf))
         object.__setattr__(self, "blurring_mask", blurring_mask(self.mask, self.psf.shape))
+
+    @cached_property
+    def n_outputs(self) -> int:
+        """Masked-image pixels N_I, the rows of every blurred column."""
+        return int(np.count_nonzero(~self.mask))
 
     @cached_property
     def extended_mask(self) -> np.ndarray:
@@ -479,7 +483,12 @@ class Convolver:
         return min(costs, key=costs.get)
 
     def blur_columns(
-        self, columns: np.ndarray, include_blurring: bool = True, method: str = "auto"
+        self,
+        columns: np.ndarray,
+        include_blurring: bool = True,
+        method: str = "auto",
+        out: np.ndarray | None = None,
+        at: np.ndarray | None = None,
     ) -> np.ndarray:
         """PSF-convolve each column and return them on the masked pixels.
 
@@ -492,10 +501,14 @@ class Convolver:
             True for light profiles (evaluated on mask ∪ blurring region), False for
             pixelized-source columns (mask only, SPEC §1.4).
         method : {"auto", "direct", "fft", "separable"}
+        out, at : ndarray (N_I, m) and int ndarray (n_col,), optional
+            Write the blurred 2D ``columns`` into ``out[:, at]`` (zero there on entry) and
+            return ``out``, instead of a new array: callers that assemble columns from
+            several routes then copy nothing.
 
         Returns
         -------
-        ndarray (N_I,) or (N_I, n_col)
+        ndarray (N_I,) or (N_I, n_col), or ``out``
         """
         columns = np.asarray(columns, dtype=float)
         vector = columns.ndim == 1
@@ -508,15 +521,27 @@ class Convolver:
                 f"{np.count_nonzero(~in_mask)} pixels"
             )
         chosen = self._method_for(include_blurring, method)
-        if chosen == "direct":
-            out = self.operator(include_blurring) @ columns
-        elif chosen == "fft":
-            out = self._fft_geometries[include_blurring].blur(columns)
-        elif chosen == "separable":
-            out = self._blur_separable(columns, include_blurring)
-        else:
+        if chosen not in ("direct", "fft", "separable"):
             raise ValueError(f"unknown convolution method {method!r}")
-        return out[:, 0] if vector else out
+        if out is None:
+            if chosen == "fft":
+                blurred = np.zeros((self.n_outputs, columns.shape[1]))
+                at = np.arange(columns.shape[1])
+                self._fft_geometries[include_blurring].blur(columns, blurred, at)
+            else:
+                blurred = self._blur_by_sums(columns, include_blurring, chosen)
+            return blurred[:, 0] if vector else blurred
+        if chosen == "fft":
+            self._fft_geometries[include_blurring].blur(columns, out, np.asarray(at))
+        else:
+            out[:, at] = self._blur_by_sums(columns, include_blurring, chosen)
+        return out
+
+    def _blur_by_sums(self, columns: np.ndarray, include_blurring: bool, method: str):
+        """The direct or separable route's blurred ``columns``."""
+        if method == "direct":
+            return self.operator(include_blurring) @ columns
+        return self._blur_separable(columns, include_blurring)
 
     def transpose_blur_columns(self, columns: np.ndarray) -> np.ndarray:
         """Bᵀ columns for the mask-to-mask operator B (``include_blurring=False``).

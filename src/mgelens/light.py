@@ -388,13 +388,17 @@ def blurred_gaussian_columns(
     ell_comps: tuple[float, float],
     sigmas: np.ndarray,
     cumulants: KernelCumulants,
+    out: np.ndarray | None = None,
+    at: np.ndarray | None = None,
 ) -> np.ndarray:
     """Unit-peak Gaussians of one geometry (``sigmas`` minor-axis, arcsec; the anchor form
     of :class:`Gaussian`) convolved with the measure of ``cumulants`` (a PSF, with the
     pixel box for pixel-integrated columns), at the points (``x``, ``y``) (arcsec):
     (n_points, n_sigmas), by the fourth-order cumulant expansion of
     :mod:`mgelens.kernel_cumulants`. Accurate for σ wide against the measure only
-    (:func:`mgelens.analytic_blur.smallest_analytic_sigma` says from where)."""
+    (:func:`mgelens.analytic_blur.smallest_analytic_sigma` says from where). With
+    ``out`` (n_points, m) and ``at`` (n_sigmas,), the columns go to ``out[:, at]`` and
+    ``out`` is returned."""
     q, angle = axis_ratio_and_angle_from(ell_comps)
     phi = np.deg2rad(angle)
     rotation = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
@@ -414,7 +418,8 @@ def blurred_gaussian_columns(
     linear3 = 3.0 * np.einsum("ijk,gij->gk", k3, p)
     quad = 6.0 * np.einsum("ijkl,gij->gkl", k4, p)
     constant4 = 3.0 * np.einsum("gkl,gkl->g", np.einsum("ijkl,gij->gkl", k4, p), p)
-    out = np.empty((sigmas.size, np.size(x)))
+    if out is None:
+        out, at = np.empty((np.size(x), sigmas.size)), np.arange(sigmas.size)
     _closed_form_columns(
         np.ascontiguousarray(x, dtype=float),
         np.ascontiguousarray(y, dtype=float),
@@ -429,19 +434,34 @@ def blurred_gaussian_columns(
         amplitude,
         _EXP_TABLE,
         out,
+        np.asarray(at, dtype=np.int64),
     )
-    return out.T
+    return out
 
 
 @njit(parallel=True, fastmath=True)
 def _closed_form_columns(
-    x, y, xc, yc, precision, third, fourth, linear3, quadratic4, constant4, amplitude, table, out
+    x,
+    y,
+    xc,
+    yc,
+    precision,
+    third,
+    fourth,
+    linear3,
+    quadratic4,
+    constant4,
+    amplitude,
+    table,
+    out,
+    at,
 ):
-    """out[k, p]: column k of :func:`blurred_gaussian_columns` at point p; terms whose
+    """out[p, at[k]]: column k of :func:`blurred_gaussian_columns` at point p; terms whose
     exponent reaches :data:`EXPONENT_CUTOFF` are zero, as in :func:`_gaussian_columns`."""
     n = x.size
     for k in range(precision.shape[0]):
         pxx, pxy, pyy = precision[k, 0], precision[k, 1], precision[k, 2]
+        column = at[k]
         for p in prange(n):
             ux = x[p] - xc
             uy = y[p] - yc
@@ -469,7 +489,7 @@ def _closed_form_columns(
             exponent = 0.5 * (ux * vx + uy * vy)
             inside = exponent < EXPONENT_CUTOFF
             gaussian = _exp_negative(min(exponent, EXPONENT_CUTOFF), table) * inside
-            out[k, p] = amplitude[k] * gaussian * (1.0 + t3 / 6.0 + t4 / 24.0)
+            out[p, column] = amplitude[k] * gaussian * (1.0 + t3 / 6.0 + t4 / 24.0)
 
 
 def geometry_record(centre: tuple[float, float], ell_comps: tuple[float, float]) -> dict:
@@ -551,7 +571,7 @@ class LightGrid:
     def blurred_columns(self, components: list) -> np.ndarray:
         """PSF-convolved unit-intensity columns of linear light components (MGE sets,
         Sérsics), (N_I, Σ n_columns), component by component."""
-        out = np.empty((self.n_image_pixels, sum(c.n_columns for c in components)))
+        out = np.zeros((self.n_image_pixels, sum(c.n_columns for c in components)))
         on_grid, on_grid_at = [], []
         start = 0
         for component in components:
@@ -559,12 +579,14 @@ class LightGrid:
             start += component.n_columns
             wide = self._wide(component)
             if wide.any():
-                out[:, at[wide]] = blurred_gaussian_columns(
+                blurred_gaussian_columns(
                     *self.outputs,
                     component.centre,
                     component.ell_comps,
                     component.sigmas[wide],
                     self.cumulants,
+                    out=out,
+                    at=at[wide],
                 )
             if not wide.all():
                 narrow = component
@@ -573,8 +595,11 @@ class LightGrid:
                 on_grid.append(narrow.columns(self.grid))
                 on_grid_at.append(at[~wide])
         if on_grid:
-            out[:, np.concatenate(on_grid_at)] = self.convolver.blur_columns(
-                np.concatenate(on_grid, axis=1), include_blurring=True
+            self.convolver.blur_columns(
+                np.concatenate(on_grid, axis=1),
+                include_blurring=True,
+                out=out,
+                at=np.concatenate(on_grid_at),
             )
         return out
 
