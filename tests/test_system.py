@@ -1,5 +1,6 @@
 """Linear-system assembly (SPEC §6.1) and the mapping matrix (§4.5)."""
 
+import numba
 import numpy as np
 import pytest
 from scipy import signal, sparse
@@ -97,6 +98,13 @@ def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
     weighted_blurred = WeightedBlurredMapping.build(operator @ f, inverse_variance)
     f_ls = expected[:4, 4:]
     assert np.allclose(weighted_blurred.lens_source(dense), f_ls, rtol=1e-12, atol=1e-12)
+    threads = numba.get_num_threads()
+    try:  # the pass's per-thread partial sums over blocks of rows add up to the same
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        split = weighted_blurred.lens_source(dense)
+    finally:
+        numba.set_num_threads(threads)
+    assert np.allclose(split, f_ls, rtol=1e-12, atol=1e-12)
     assert np.allclose(terms.lens_source(f), f_ls, rtol=1e-12, atol=1e-12)
     no_light = curvature_matrix(np.zeros((n_pixels, 0)), f, plan, inverse_variance)
     assert np.allclose(no_light, expected[4:, 4:], rtol=1e-12, atol=1e-12)

@@ -144,22 +144,29 @@ class WeightedBlurredMapping:
     Attributes
     ----------
     indptr, indices, values : ndarray
-        W B f (N_I × n_source) in compressed-column form, sorted indices, int64 index
-        arrays as the compiled pass takes them.
+        W B f (N_I × n_source) in compressed-row form, sorted indices, int64 index arrays
+        as the compiled pass takes them: the pass reads each row of L once.
+    n_source : int
     """
 
     indptr: np.ndarray
     indices: np.ndarray
     values: np.ndarray
+    n_source: int
 
     @classmethod
     def build(
         cls, blurred_mapping: sparse.spmatrix, inverse_variance: np.ndarray
     ) -> "WeightedBlurredMapping":
         """From B f (N_I, n_source) and the w_i (N_I,)."""
-        matrix = sparse.csc_matrix(sparse.diags(inverse_variance) @ blurred_mapping)
+        matrix = sparse.csr_matrix(sparse.diags(inverse_variance) @ blurred_mapping)
         matrix.sort_indices()
-        return cls(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.data)
+        return cls(
+            matrix.indptr.astype(np.int64),
+            matrix.indices.astype(np.int64),
+            matrix.data,
+            matrix.shape[1],
+        )
 
     @staticmethod
     def cheaper(blurred_mapping: sparse.spmatrix, mapping: sparse.spmatrix, convolver) -> bool:
@@ -170,26 +177,36 @@ class WeightedBlurredMapping:
 
     def lens_source(self, dense: np.ndarray) -> np.ndarray:
         """F_LS = Lᵀ W B f (n_dense, n_source) of dense columns L (N_I, n_dense)."""
-        out = np.empty((self.indptr.size - 1, dense.shape[1]))
-        _transposed_sparse_product(
-            self.indptr, self.indices, self.values, np.ascontiguousarray(dense), out
+        partial = _transposed_sparse_product(
+            self.indptr,
+            self.indices,
+            self.values,
+            np.ascontiguousarray(dense),
+            self.n_source,
+            numba.get_num_threads(),
         )
-        return out.T
+        return partial.sum(axis=0).T if partial.shape[0] > 1 else partial[0].T
 
 
 @njit(parallel=True, fastmath=True)
-def _transposed_sparse_product(indptr, indices, values, dense, out):
-    """out[j] = Σ_k values[k] dense[indices[k]] over column j's non-zeros of a CSC matrix
-    (out = Aᵀ dense): one contiguous row of ``dense`` per non-zero."""
+def _transposed_sparse_product(indptr, indices, values, dense, n_cols, n_parts):
+    """Aᵀ dense for a CSR matrix A (n_rows × ``n_cols``), as ``n_parts`` partial sums
+    (n_parts, n_cols, n_dense) over contiguous blocks of rows, one per thread: each row
+    of ``dense`` is read once and added, scaled, to the rows of its non-zeros' columns."""
+    n_rows = indptr.size - 1
     n_dense = dense.shape[1]
-    for j in prange(indptr.size - 1):
-        row = out[j]
-        row[:] = 0.0
-        for k in range(indptr[j], indptr[j + 1]):
-            value = values[k]
-            source = dense[indices[k]]
-            for m in range(n_dense):
-                row[m] += value * source[m]
+    partial = np.zeros((n_parts, n_cols, n_dense))
+    block = (n_rows + n_parts - 1) // n_parts
+    for part in prange(n_parts):
+        acc = partial[part]
+        for i in range(part * block, min(n_rows, (part + 1) * block)):
+            source = dense[i]
+            for k in range(indptr[i], indptr[i + 1]):
+                value = values[k]
+                row = acc[indices[k]]
+                for m in range(n_dense):
+                    row[m] += value * source[m]
+    return partial
 
 
 def weighted_gram(dense: np.ndarray, inverse_variance: np.ndarray) -> np.ndarray:
