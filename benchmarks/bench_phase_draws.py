@@ -12,7 +12,9 @@ source system, its reference passive set from the prior medians, exactly as
 One numba and one BLAS thread (the jobs' thread policy). It prints ``draws_cpu_ms_<phase>_
 <kind>`` (median) and ``..._mean`` per kind, and the sum of ln L over the accepted draws,
 ``draws_log_likelihood_sum_<phase>_<kind>``, so that two code versions can be checked to
-give the same values. Run from the repository root, e.g.::
+give the same values, and ``host_yardstick_cpu_ms`` (``common.host_yardstick_ms``), the
+host's speed on a fixed workload, to compare figures across hosts. Run from the
+repository root, e.g.::
 
     python benchmarks/bench_phase_draws.py --lens-dir ../shared/data/slacs/slacs1250+0523 \\
         --results results/slacs1250+0523 --mask-radius 3.0 --phase light --mge-sets 6
@@ -23,7 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from common import set_threads
+from common import host_yardstick_ms, set_threads
 
 from mgelens.pipeline.run import PhaseLikelihood, build_problem, reference_passive_set
 from mgelens.pipeline.settings import PHASES, LensSpec, profile_settings
@@ -60,6 +62,7 @@ def main() -> None:
     )
     rng = np.random.default_rng(0)
     print(f"lens: {args.lens_dir.name}  phase: {args.phase}  free: {problem.space.n_free}")
+    print(f"host_yardstick_cpu_ms: {host_yardstick_ms():.1f}")
     for kind in ("prior", "centre"):
         points = [
             problem.space.prior_transform(u)

@@ -11,7 +11,9 @@ keeps), and prints
   shared with other jobs);
 * ``stage_ms_<phase>_<stage>``: the median call split by stage, from a cProfile run of
   the same calls (``other`` is the rest: Python glue, the model image, the χ², and the
-  profiler's own overhead).
+  profiler's own overhead);
+* ``host_yardstick_cpu_ms``: the host's speed on a fixed workload
+  (``common.host_yardstick_ms``), to compare figures across hosts.
 
 The nominal model is an SIE + shear at the brightest pixel within 0.5″ of the mask
 centre, with θ_E from ``--einstein-radius`` (default: the mock's ``truth.json``, else
@@ -43,7 +45,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from common import set_threads
+from common import host_yardstick_ms, set_threads
 
 from mgelens.fit import figure_of_merit, fit
 from mgelens.geometry import ell_comps_from
@@ -279,6 +281,7 @@ def main() -> None:
     calls, dataset, centre = phase_calls(args.lens_dir, settings, lens, theta_e, args.calls, seed=0)
     calls = {phase: calls[phase] for phase in args.phases}
     print(f"lens: {args.lens_dir.name}  profile: {args.profile}  threads: {args.threads}")
+    print(f"host_yardstick_cpu_ms: {host_yardstick_ms():.1f}")
     print(
         f"n_image_pixels: {dataset.data.size}  light_sub_pixels: {dataset.light_grid.grid.x.size}"
         f"  psf: {dataset.convolver.psf.shape}  centre: ({centre[0]:.3f}, {centre[1]:.3f})"

@@ -70,3 +70,31 @@ def peak_traced_mb(function) -> float:
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     return peak / 1e6
+
+
+def host_yardstick_ms(repeats: int = 5) -> float:
+    """Median CPU ms, on one thread, of a fixed workload shaped like a real lens's
+    likelihood call: 60 real FFT round trips of a 135² frame and the weighted Gram of
+    190 columns over 11,289 pixels. Printed beside per-call figures so that figures from
+    different hosts can be compared (hosts of our kind differ by 2–2.5×,
+    docs/benchmarks.md); the workload does not depend on mgelens's code, so a code change
+    does not move it."""
+    import scipy.fft
+    from scipy.linalg import blas
+
+    rng = np.random.default_rng(0)
+    frames = rng.random((60, 135, 135))
+    columns = rng.random((190, 11289)).T  # Fortran-ordered (11289, 190), as dsyrk takes
+
+    def workload():
+        spectrum = scipy.fft.rfft2(frames, workers=1)
+        scipy.fft.irfft2(spectrum, s=frames.shape[1:], workers=1)
+        blas.dsyrk(1.0, columns.T, trans=0, lower=0)
+
+    workload()
+    cpu = []
+    for _ in range(repeats):
+        start = time.process_time()
+        workload()
+        cpu.append(time.process_time() - start)
+    return 1e3 * float(np.median(cpu))
