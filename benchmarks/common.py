@@ -91,10 +91,4 @@ def host_yardstick_ms(repeats: int = 5) -> float:
         scipy.fft.irfft2(spectrum, s=frames.shape[1:], workers=1)
         blas.dsyrk(1.0, columns.T, trans=0, lower=0)
 
-    workload()
-    cpu = []
-    for _ in range(repeats):
-        start = time.process_time()
-        workload()
-        cpu.append(time.process_time() - start)
-    return 1e3 * float(np.median(cpu))
+    return 1e3 * timings(workload, repeats)[2]
