@@ -419,11 +419,6 @@ class Convolver:
         object.__setattr__(self, "blurring_mask", blurring_mask(self.mask, self.psf.shape))
 
     @cached_property
-    def n_outputs(self) -> int:
-        """Masked-image pixels N_I, the rows of every blurred column."""
-        return int(np.count_nonzero(~self.mask))
-
-    @cached_property
     def extended_mask(self) -> np.ndarray:
         """Mask of the unmasked ∪ blurring-region pixels (False there)."""
         return self.mask & self.blurring_mask
@@ -525,9 +520,9 @@ class Convolver:
             raise ValueError(f"unknown convolution method {method!r}")
         if out is None:
             if chosen == "fft":
-                blurred = np.zeros((self.n_outputs, columns.shape[1]))
-                at = np.arange(columns.shape[1])
-                self._fft_geometries[include_blurring].blur(columns, blurred, at)
+                geometry = self._fft_geometries[include_blurring]
+                blurred = np.zeros((geometry.n_out, columns.shape[1]))
+                geometry.blur(columns, blurred, np.arange(columns.shape[1]))
             else:
                 blurred = self._blur_by_sums(columns, include_blurring, chosen)
             return blurred[:, 0] if vector else blurred

@@ -21,10 +21,9 @@ tensors of μ (μ_P's plus the box's: Δ²/12 on the diagonal of C, −Δ⁴/120
 pure entries). Its error falls as σ⁻⁶ and depends only on the PSF:
 :func:`mgelens.analytic_blur.smallest_analytic_sigma` finds, once per PSF, the minor-axis
 σ from which it stays below a tolerance of the column's peak against the exact discrete
-convolution. The box
-is integrated exactly, where the sub-grid differs from it by about Δ²(1 − 1/s²)/12
-in variance (a relative ≈ 0.02 Δ²/σ² for s = 2): wide columns move by about that much
-between the two routes, which is the sub-grid's own error.
+convolution. The box is integrated exactly, where the sub-grid differs from it by about
+Δ²(1 − 1/s²)/12 in variance (a relative ≈ 0.02 Δ²/σ² for s = 2): wide columns move by
+about that much between the two routes, which is the sub-grid's own error.
 
 Conventions: (x, y) arcsec with +x along columns and +y along rows (``grid.pixel_centres``);
 a kernel entry [a, b] of a (2h+1)² PSF moves light by ((b − h) Δ, (a − h) Δ), as

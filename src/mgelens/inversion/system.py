@@ -185,7 +185,7 @@ class WeightedBlurredMapping:
             self.n_source,
             numba.get_num_threads(),
         )
-        return partial.sum(axis=0).T if partial.shape[0] > 1 else partial[0].T
+        return partial.sum(axis=0).T
 
 
 @njit(parallel=True, fastmath=True)
