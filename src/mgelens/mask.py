@@ -166,6 +166,51 @@ def from_fits(
         return check_mask(mask, mask.shape if shape is None else shape)
 
 
+def read_contaminant_circles(path: str | os.PathLike) -> tuple[tuple[float, float, float], ...]:
+    """Contaminant circles from a text file: one ``x y radius`` per line (arcsec; centre in
+    the coordinates of :func:`mgelens.grid.pixel_centres`, +x right and +y up from the image
+    centre); ``#`` starts a comment, blank lines are skipped. For neighbours that the
+    input's noise map does not mark (e.g. a compact object at the mask's edge): the fit
+    treats these pixels as it treats the SLACS sentinels (:func:`contaminants`).
+
+    Raises
+    ------
+    MaskError
+        Naming the file (and the line): unreadable, a line that is not three numbers, a
+        non-finite value or a radius ≤ 0, or no circle at all.
+    """
+    try:
+        lines = open(path, encoding="utf-8").read().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MaskError(
+            f"{path}: cannot read the contaminant circles ({exc}); give a text file of "
+            "`x y radius` lines in arcsec"
+        ) from exc
+    circles = []
+    for number, line in enumerate(lines, start=1):
+        content = line.split("#", 1)[0].split()
+        if not content:
+            continue
+        try:
+            x, y, radius = (float(value) for value in content)
+        except ValueError:
+            raise MaskError(
+                f"{path}, line {number}: {line.strip()!r} is not `x y radius` (three numbers "
+                "in arcsec)"
+            ) from None
+        if not (np.isfinite([x, y, radius]).all() and radius > 0.0):
+            raise MaskError(
+                f"{path}, line {number}: {line.strip()!r} needs finite numbers and a radius > 0"
+            )
+        circles.append((x, y, radius))
+    if not circles:
+        raise MaskError(
+            f"{path}: no contaminant circle; add `x y radius` lines (arcsec) or remove the file "
+            "from the sample sheet"
+        )
+    return tuple(circles)
+
+
 def contaminant_regions_from_noise(
     noise_map: np.ndarray, threshold: float = SLACS_NOISE_THRESHOLD
 ) -> np.ndarray:

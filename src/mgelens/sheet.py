@@ -15,7 +15,7 @@ class SheetError(ValueError):
     """An unreadable sample sheet; the message names the sheet and the fix."""
 
 
-STRING_COLUMNS = ("lens", "mock", "input", "lens_light")
+STRING_COLUMNS = ("lens", "mock", "input", "lens_light", "contaminants")
 """Columns read as text whatever they hold (a lens id ``1`` stays "1")."""
 
 

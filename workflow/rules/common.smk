@@ -8,6 +8,7 @@ top-level Snakefile, so `snakemake -d <elsewhere>` finds them too.
 import json
 import os
 import re
+import shlex
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -107,8 +108,17 @@ def real_input_folder(lens: str) -> Path:
     return folder if folder.is_absolute() else DATA_DIR / folder
 
 
+def contaminant_file(lens: str) -> Path | None:
+    """The lens's `contaminants` file (relative to the repository root), or None."""
+    row = lens_row(lens)
+    if "contaminants" not in row or pd.isna(row["contaminants"]):
+        return None
+    return repo_path(row["contaminants"])
+
+
 def check_real_inputs() -> None:
-    """Stop early, naming sheet, lens and folder, if a real lens's input folder is absent."""
+    """Stop early, naming sheet, lens and folder, if a real lens's input folder is absent
+    or a lens's contaminants file is."""
     for lens in LENSES.index[LENSES["kind"] == "real"]:
         folder = real_input_folder(lens)
         missing = [f for f in ("data.fits", "noise_map.fits", "psf.fits") if not (folder / f).is_file()]
@@ -117,6 +127,13 @@ def check_real_inputs() -> None:
                 f"{SAMPLE_SHEET}: real lens {lens!r}: {', '.join(missing)} not found in {folder}; "
                 f"set `data_dir` in the config (now {config['data_dir']!r}, relative to "
                 f"{REPO}) or fix the `input` column of the sheet"
+            )
+    for lens in LENSES.index:
+        path = contaminant_file(lens)
+        if path is not None and not path.is_file():
+            raise WorkflowError(
+                f"{SAMPLE_SHEET}: lens {lens!r}: contaminants file {path} not found; fix the "
+                f"`contaminants` column (relative to {REPO}) or leave it empty"
             )
 
 
@@ -158,14 +175,18 @@ def lens_imaging_folder(wildcards) -> str:
 
 
 def imaging_files(wildcards) -> dict:
-    """data, noise_map and psf files of a lens (mock: made by rule simulate_mock), and a
-    real lens's optional mask.fits and info.json (pixel scale), which the fits read too."""
+    """data, noise_map and psf files of a lens (mock: made by rule simulate_mock), a real
+    lens's optional mask.fits and info.json (pixel scale), which the fits read too, and
+    the sheet's contaminants file."""
     folder = imaging_folder(wildcards.lens)
     files = {name: f"{folder}/{name}.fits" for name in ("data", "noise_map", "psf")}
     if not is_mock(wildcards.lens):
         for name, file in (("mask", MASK_FILE), ("info", INFO_FILE)):
             if (Path(folder) / file).is_file():
                 files[name] = f"{folder}/{file}"
+    contaminants = contaminant_file(wildcards.lens)
+    if contaminants is not None:
+        files["contaminants"] = str(contaminants)
     return files
 
 
@@ -409,11 +430,15 @@ def light_model_of(wildcards):
 
 
 def phase_options(wildcards) -> str:
-    """Per-lens CLI options from the sample sheet: the mask radius and pixel scale, and for
+    """Per-lens CLI options from the sample sheet: the mask radius, pixel scale and
+    contaminants file, and for
     LIGHT (the only phase that reads them) the MGE sets and point set of the pinned model
     or of the candidate; then the config's sampler seed."""
     row = lens_row(wildcards.lens)
     options = f"--mask-radius {row['mask_radius']}{pixel_scale_option(wildcards)}"
+    contaminants = contaminant_file(wildcards.lens)
+    if contaminants is not None:
+        options += f" --contaminants {shlex.quote(str(contaminants))}"
     if wildcards.phase.startswith("light"):
         model = light_model_of(wildcards)
         point = "yes" if model.point_set else "no"

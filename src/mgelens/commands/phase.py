@@ -14,8 +14,8 @@ unless the ``slam:`` settings say otherwise), then the ``slam:`` section of ``--
 then ``--slam`` (the same content as JSON; the workflow passes its config's section this
 way). What is set per lens (:class:`~mgelens.pipeline.settings.LensSpec`, the sample
 sheet's columns) comes from ``--mask-radius`` (default: the folder's ``truth.json``),
-``--mask-centre``, ``--pixel-scale``, ``--mge-sets`` (default 4) and ``--point-set``
-(default yes).
+``--mask-centre``, ``--pixel-scale``, ``--contaminants`` (a text file of circles),
+``--mge-sets`` (default 4) and ``--point-set`` (default yes).
 """
 
 import argparse
@@ -26,6 +26,7 @@ from pathlib import Path
 from mgelens import threads
 from mgelens.commands import make_output_folders
 from mgelens.imaging_input import ImagingError
+from mgelens.mask import read_contaminant_circles
 from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import records
 from mgelens.pipeline.run import run_phase
@@ -94,6 +95,13 @@ def register(subparsers) -> None:
         help="arcsec per image pixel (default: the folder's info.json, else the data header)",
     )
     parser.add_argument(
+        "--contaminants",
+        type=Path,
+        metavar="FILE",
+        help="text file of circles `x y radius` (arcsec) whose pixels the fit treats as "
+        "contaminants, for neighbours the noise map does not mark",
+    )
+    parser.add_argument(
         "--mge-sets",
         type=int,
         choices=MGE_SET_CHOICES,
@@ -120,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
             pixel_scale=args.pixel_scale,
             mge_sets=args.mge_sets,
             point_set=args.point_set == "yes",
+            contaminants=read_contaminant_circles(args.contaminants) if args.contaminants else (),
         )
         folder = args.folder or args.phase
         make_output_folders(args.results / folder / RESULT_FILE)

@@ -36,7 +36,7 @@ from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.atomic import write_json
 from mgelens.imaging import MASK_FILE, Imaging
 from mgelens.imaging_input import ImagingError, read_fits_mask
-from mgelens.mask import circular
+from mgelens.mask import circular, contaminants
 from mgelens.pipeline.records import (
     MODEL_FILE,
     fit_record_of,
@@ -100,6 +100,8 @@ def run(args: argparse.Namespace) -> int:
         circle = functools.partial(_circle, float(settings["mask_radius"]), spec.mask_centre)
         # the sheet's pixel scale, if the fit had one
         imaging = Imaging.from_folder(lens_dir, pixel_scale=spec.pixel_scale, mask_from=circle)
+        if spec.contaminants:  # as the fit saw them
+            imaging = contaminants(imaging, spec.contaminants)
         nresid, lensed = read_residual_images(args.phase / MODEL_FILE)
         mask_file = lens_dir / MASK_FILE
         sky = sky_pixels(

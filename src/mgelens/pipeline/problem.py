@@ -162,7 +162,8 @@ def load_dataset(
     settings, and the mask radius.
 
     A ``mask.fits`` in the folder is combined with the circle (a pixel is used only if
-    both use it); only the pixels used must hold finite data and a positive noise.
+    both use it); only the pixels used must hold finite data and a positive noise. The
+    lens's ``contaminants`` circles get the sentinel noise (:func:`mgelens.mask.contaminants`).
     ``light_centre`` (arcsec) is where light profiles are over-sampled.
 
     Raises
@@ -176,6 +177,8 @@ def load_dataset(
     data_file = lens_dir / DATA_FILE
     circle = functools.partial(_fit_circle, data_file, radius, lens.mask_centre)
     imaging = Imaging.from_folder(lens_dir, pixel_scale=lens.pixel_scale, mask_from=circle)
+    if lens.contaminants:
+        imaging = mask_module.contaminants(imaging, lens.contaminants)
     mask = imaging.mask
     fittable.check_signal(data_file, imaging, mask, radius)
     return FitDataset.from_imaging(imaging, mask, settings.fit, light_centre), radius

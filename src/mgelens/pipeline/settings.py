@@ -266,6 +266,7 @@ LENS_KEYS = {
     "pixel_scale": "--pixel-scale, or the sample sheet's pixel_scale column",
     "mge_sets": "--mge-sets, or the sample sheet's mge_sets column",
     "point_set": "--point-set, or the sample sheet's point_set column",
+    "contaminants": "--contaminants, or the sample sheet's contaminants column",
 }
 """What a :class:`LensSpec` holds, and where each value is given."""
 
@@ -289,6 +290,10 @@ class LensSpec:
         Extended 30-Gaussian sets of the LIGHT phase (SP always uses 2).
     point_set : bool
         Add the 10-Gaussian point set (own centre and ell_comps) in the LIGHT phase.
+    contaminants : tuple of (x, y, radius)
+        Circles (arcsec) of neighbours that the input's noise map does not mark; every phase
+        treats their pixels as contaminant sentinels (:func:`mgelens.mask.contaminants`),
+        and the quality check and figures read them from the phase's record.
 
     Only LIGHT reads ``mge_sets`` and ``point_set`` (MASS takes LIGHT's lens light from its
     record), so the workflow passes them to LIGHT alone and the other phases record the
@@ -300,6 +305,7 @@ class LensSpec:
     pixel_scale: float | None = None
     mge_sets: int = 4
     point_set: bool = True
+    contaminants: tuple[tuple[float, float, float], ...] = ()
 
     def __post_init__(self):
         """Check every field; a :class:`SettingsError` names the field and where it is set."""
@@ -312,6 +318,7 @@ class LensSpec:
                     "mge_sets", values.integer("mge_sets", self.mge_sets, 1), MGE_SET_CHOICES
                 ),
                 "point_set": values.boolean("point_set", self.point_set),
+                "contaminants": _circles(self.contaminants),
             }
             for name in ("mask_radius", "pixel_scale"):
                 if getattr(self, name) is not None:
@@ -326,7 +333,26 @@ class LensSpec:
         """JSON-ready form (recorded in every result file)."""
         content = dataclasses.asdict(self)
         content["mask_centre"] = list(self.mask_centre)
+        content["contaminants"] = [list(circle) for circle in self.contaminants]
         return content
+
+
+def _circles(circles) -> tuple[tuple[float, float, float], ...]:
+    """``circles`` as a tuple of (x, y, radius > 0) number triples."""
+    what = "a list of circles [x, y, radius] in arcsec with radius > 0"
+    if not isinstance(circles, list | tuple):
+        raise ValueError(f"contaminants must be {what}, got {circles!r}")
+    checked = []
+    for circle in circles:
+        if not isinstance(circle, list | tuple) or len(circle) != 3:
+            raise ValueError(f"contaminants must be {what}, got {circle!r} in it")
+        try:
+            x, y = (values.number("contaminants", value) for value in circle[:2])
+            radius = values.number("contaminants", circle[2], 0.0, open_minimum=True)
+        except ValueError:
+            raise ValueError(f"contaminants must be {what}, got {circle!r} in it") from None
+        checked.append((x, y, radius))
+    return tuple(checked)
 
 
 _PAPER_SAMPLERS = {
