@@ -16,6 +16,7 @@ from mgelens.mask import (
     contaminant_regions_from_noise,
     contaminants,
     from_fits,
+    read_contaminant_circles,
     validate_mask,
 )
 
@@ -238,3 +239,32 @@ def test_contaminants_bad_regions() -> None:
         contaminants(imaging, [(50.0, 50.0, 1.0)])
     with pytest.raises(MaskError, match="factor must be finite and > 0"):
         contaminants(imaging, [(0.0, 0.0, 0.3)], factor=-1.0)
+
+
+def test_contaminant_circles_are_read_with_comments_and_blank_lines(tmp_path: Path) -> None:
+    path = tmp_path / "neighbours.txt"
+    path.write_text("# x y radius\n\n1.15 2.70 0.35  # the edge object\n-2 0.5e0 1\n")
+    assert read_contaminant_circles(path) == ((1.15, 2.7, 0.35), (-2.0, 0.5, 1.0))
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("1.0 2.0\n", r"line 1: '1.0 2.0' is not `x y radius`"),
+        ("# a\n1 2 3 4\n", r"line 2: '1 2 3 4' is not `x y radius`"),
+        ("1 two 0.3\n", r"line 1: '1 two 0.3' is not `x y radius`"),
+        ("1 2 0\n", r"line 1: '1 2 0' needs finite numbers and a radius > 0"),
+        ("nan 2 0.3\n", r"line 1: 'nan 2 0.3' needs finite numbers"),
+        ("# only a comment\n", r"no contaminant circle; add `x y radius` lines"),
+    ],
+)
+def test_bad_contaminant_files_name_the_file_and_line(tmp_path: Path, text, message) -> None:
+    path = tmp_path / "neighbours.txt"
+    path.write_text(text)
+    with pytest.raises(MaskError, match=re.escape(str(path)) + ".*" + message):
+        read_contaminant_circles(path)
+
+
+def test_a_missing_contaminant_file_is_named(tmp_path: Path) -> None:
+    with pytest.raises(MaskError, match="absent.txt: cannot read the contaminant circles"):
+        read_contaminant_circles(tmp_path / "absent.txt")

@@ -20,6 +20,7 @@ from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.isophotes import STATISTICS_SMA_RANGE, isophote_table
+from mgelens.mask import contaminant_regions_from_noise
 from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
 from mgelens.pipeline import models, problem, products, records, run
 from mgelens.pipeline.phases import light as light_phase
@@ -408,6 +409,29 @@ def test_fit_settings_reach_the_fit(mock_dir):
         assert dataset.settings.edge_rule == rule
 
 
+def test_contaminant_circles_give_their_pixels_the_sentinel_noise(mock_dir):
+    """The lens's contaminants raise the noise of the pixels inside them by 1e8 (the
+    SLACS sentinel), leave every other pixel and the mask as they are, and the figures
+    and the quality check see them as masked contaminants."""
+    settings = profile_settings("quick")
+    plain, _ = problem.load_dataset(mock_dir, settings, LENS, (0.0, 0.0))
+    circle = (0.3, -0.2, 0.25)
+    lens = dataclasses.replace(LENS, contaminants=(circle,))
+    marked, _ = problem.load_dataset(mock_dir, settings, lens, (0.0, 0.0))
+    np.testing.assert_array_equal(marked.mask, plain.mask)
+    x, y = marked.pixel_centres
+    inside = np.hypot(x - circle[0], y - circle[1]) <= circle[2]
+    assert inside.sum() == pytest.approx(
+        np.pi * (circle[2] / marked.imaging.pixel_scale) ** 2, rel=0.15
+    )
+    np.testing.assert_allclose(
+        plain.inverse_variance[inside] / marked.inverse_variance[inside], 1e16
+    )
+    np.testing.assert_array_equal(marked.inverse_variance[~inside], plain.inverse_variance[~inside])
+    np.testing.assert_array_equal(marked.data, plain.data)
+    assert (contaminant_regions_from_noise(marked.imaging.noise_map)[~marked.mask] == inside).all()
+
+
 def test_sersic_lens_light_needs_its_solve_stated():
     """No setting silently changes another: 3×Sérsic without positive_only is refused
     (the default, true, is the MGE's; the paper's Sérsic runs were unconstrained)."""
@@ -514,6 +538,9 @@ def test_invalid_settings_name_the_key(section, message):
         ({"mask_centre": [1]}, r"mask_centre must be two numbers \(x, y\) in arcsec"),
         ({"pixel_scale": -0.05}, r"pixel_scale must be a number > 0.*--pixel-scale"),
         ({"point_set": "yes"}, r"point_set must be true or false"),
+        ({"contaminants": [[1, 2, 0]]}, r"contaminants must be .* radius > 0, got \[1, 2, 0\] in"),
+        ({"contaminants": [[1, 2]]}, r"contaminants must be a list of circles .*--contaminants"),
+        ({"contaminants": "c.txt"}, r"contaminants must be a list of circles"),
     ],
 )
 def test_invalid_lens_values_name_the_option(values, message):
@@ -525,8 +552,15 @@ def test_lens_spec_is_recorded_and_read_back(tmp_path):
     """result.json records the chain's settings (fit nested) and the lens spec apart, and
     records written before they were apart (flat ``slam``) read into the same two."""
     settings = settings_from_mapping({"fit": {"sub_size": 3}, "source_pixels": 600})
-    lens = LensSpec(mask_radius=1.5, mask_centre=(0.1, -0.2), mge_sets=6, point_set=False)
+    lens = LensSpec(
+        mask_radius=1.5,
+        mask_centre=(0.1, -0.2),
+        mge_sets=6,
+        point_set=False,
+        contaminants=((0.5, -0.4, 0.2),),
+    )
     record = {"slam": settings.to_dict(), "lens": lens.to_dict()}
+    record = json.loads(json.dumps(record))  # as result.json holds it
     assert records.recorded_settings(record) == (settings, lens)
     flat = {k: v for k, v in settings.to_dict().items() if k != "fit"}
     flat.update(settings.fit.to_dict())
@@ -865,6 +899,24 @@ def test_quality_of_a_chains_mass_phase(sersic_run, mock_dir, tmp_path):
         fitted = int(np.count_nonzero(hdus["NRESID"].data))
     assert 0 < record["n_pixels"] <= fitted
     assert abs(record["significance"]) < 5
+
+
+def test_quality_leaves_out_the_contaminants_the_fit_recorded(sersic_run, mock_dir, tmp_path):
+    """The quality check reads the lens's contaminant circles from the MASS record, as the
+    fit saw them, and leaves their pixels out of its statistic."""
+    counts = []
+    for contaminants in ([], [[0.0, 0.6, 0.4]]):
+        phase = tmp_path / f"mass{len(contaminants)}"
+        shutil.copytree(sersic_run / "mass", phase)
+        record = json.loads((phase / "result.json").read_text())
+        record["settings"]["lens"]["contaminants"] = contaminants
+        (phase / "result.json").write_text(json.dumps(record))
+        out = phase / "quality.json"
+        arguments = ["quality", "--phase", str(phase), "--lens-dir", str(mock_dir)]
+        assert main([*arguments, "--out", str(out)]) == 0
+        counts.append(json.loads(out.read_text())["n_pixels"])
+    circle_pixels = np.pi * (0.4 / PIXEL) ** 2
+    assert counts[0] - counts[1] == pytest.approx(circle_pixels, rel=0.3)
 
 
 def test_a_phase_refuses_an_unconverged_earlier_phase(sersic_run, mock_dir, tmp_path):

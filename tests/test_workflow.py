@@ -21,6 +21,7 @@ from workflow_run import CHAIN_TIMEOUT, ROOT, snakemake
 
 from mgelens import cli, mock_lenses
 from mgelens import simulate as sim
+from mgelens.pipeline.settings import PHASES
 from mgelens.recovery import true_mass_parameters
 from mgelens.sheet import read_sample_sheet
 
@@ -123,6 +124,39 @@ def test_a_real_lenss_mask_and_info_files_are_phase_inputs(tmp_path):
     inputs = re.search(r"rule phase:\n(?:.*\n)*?\s+input: (.*)", result.stdout + result.stderr)[1]
     assert str(folder / "mask.fits") in inputs
     assert str(folder / "info.json") in inputs
+
+
+def test_a_contaminants_file_reaches_every_phase_as_option_and_input(tmp_path):
+    """The sheet's `contaminants` file goes to every phase (`--contaminants`) and is an
+    input of the phases, the overview and the quality check, so editing it reruns them;
+    an absent file stops the run naming the column."""
+    from mgelens.imaging import Imaging
+
+    shape = (21, 21)
+    psf = np.zeros((3, 3))
+    psf[1, 1] = 1.0
+    Imaging(np.zeros(shape), np.ones(shape), psf, 0.05).to_fits(tmp_path / "data" / "R1")
+    circles = tmp_path / "R1 neighbours.txt"
+    circles.write_text("0.2 0.1 0.1\n")
+    header = SHEET_HEADER.replace("\n", "\tcontaminants\n")
+    (tmp_path / "sheet.tsv").write_text(
+        header + f"R1\treal\t\tR1\t0.5\t2\tno\t0.2\t0.6\t{circles}\n"
+    )
+    config = tmp_path / "config.yaml"
+    config.write_text(f"samples: {tmp_path / 'sheet.tsv'}\ndata_dir: {tmp_path / 'data'}\n")
+    targets = ["results/R1/quality.json", "results/R1/figures/overview.png"]
+    result = snakemake(*targets, "-n", "-p", "--configfile", str(config), workdir=tmp_path)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    assert output.count(f"--contaminants '{circles}'") == len(PHASES)
+    inputs = re.findall(r"rule (\w+):\n(?:.*\n)*?\s+input: (.*)", output)
+    reading = {rule for rule, files in inputs if str(circles) in files}
+    assert reading >= {"phase", "phase_light", "overview", "fit_quality"}
+    circles.unlink()
+    result = snakemake(*targets, "-n", "--configfile", str(config), workdir=tmp_path)
+    assert result.returncode != 0
+    assert "lens 'R1': contaminants file" in result.stdout + result.stderr
+    assert "fix the `contaminants` column" in result.stdout + result.stderr
 
 
 def test_sampler_seed_reaches_every_phase(tmp_path):

@@ -14,6 +14,7 @@ removes them from χ², and their constant ln(2πσ²) terms cancel between mode
 import os
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 
@@ -180,7 +181,7 @@ def read_contaminant_circles(path: str | os.PathLike) -> tuple[tuple[float, floa
         non-finite value or a radius ≤ 0, or no circle at all.
     """
     try:
-        lines = open(path, encoding="utf-8").read().splitlines()
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise MaskError(
             f"{path}: cannot read the contaminant circles ({exc}); give a text file of "
