@@ -696,6 +696,7 @@ def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):
         {"overlay_shape": (20, 20)},
         {"positions_penalty": False},
         {"lens": {"mask_radius": 1.2}},
+        {"lens": {"contaminants": ((0.3, 0.2, 0.2),)}},  # same mask, other noise
         {"fit": {"sub_size": 3}},
     ],
 )

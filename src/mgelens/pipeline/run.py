@@ -155,16 +155,19 @@ def sampler_for(settings: SamplerSettings, n_free: int) -> SamplerSettings:
 
 def problem_fingerprint(problem: PhaseProblem, checksums: dict) -> dict:
     """Everything a phase's likelihood and priors depend on: the parameter space, the model
-    (lens-light sets, source mesh, regularization, interpolation), the fit settings, a hash
-    of the mask, the positions penalty, the input checksums and the version of the code
+    (lens-light sets, source mesh, regularization, interpolation), the fit settings, hashes
+    of the mask and of the pixels' weights (the noise map with any contaminant circles of
+    the lens spec), the positions penalty, the input checksums and the version of the code
     that fits (:func:`~mgelens.provenance.command_version` of ``mgelens phase``)."""
     mask = np.ascontiguousarray(problem.dataset.mask)
+    weights = np.ascontiguousarray(problem.dataset.inverse_variance)
     return {
         "phase": problem.name,
         "space": problem.space.to_dict(),
         "model": problem.model.describe(),
         "fit": dataclasses.asdict(problem.dataset.settings),
         "mask": hashlib.sha256(mask.tobytes() + str(mask.shape).encode()).hexdigest(),
+        "weights": hashlib.sha256(weights.tobytes()).hexdigest(),
         "positions": None if problem.positions is None else problem.positions.describe(),
         "inputs": checksums,
         "version": command_version("phase"),
