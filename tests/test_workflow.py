@@ -144,14 +144,15 @@ def test_a_contaminants_file_reaches_every_phase_as_option_and_input(tmp_path):
     )
     config = tmp_path / "config.yaml"
     config.write_text(f"samples: {tmp_path / 'sheet.tsv'}\ndata_dir: {tmp_path / 'data'}\n")
-    targets = ["results/R1/quality.json", "results/R1/figures/overview.png"]
+    targets = [f"results/R1/{name}" for name in ("quality.json", "figures/overview.png")]
+    targets.append("results/R1/figures/preview.png")
     result = snakemake(*targets, "-n", "-p", "--configfile", str(config), workdir=tmp_path)
     output = result.stdout + result.stderr
     assert result.returncode == 0, output
-    assert output.count(f"--contaminants '{circles}'") == len(PHASES)
+    assert output.count(f"--contaminants '{circles}'") == len(PHASES) + 1  # and the preview
     inputs = re.findall(r"rule (\w+):\n(?:.*\n)*?\s+input: (.*)", output)
     reading = {rule for rule, files in inputs if str(circles) in files}
-    assert reading >= {"phase", "phase_light", "overview", "fit_quality"}
+    assert reading >= {"phase", "phase_light", "overview", "fit_quality", "preview"}
     circles.unlink()
     result = snakemake(*targets, "-n", "--configfile", str(config), workdir=tmp_path)
     assert result.returncode != 0
@@ -494,6 +495,33 @@ def test_preview_of_a_real_lens(tmp_path, slacs_dir):
     assert cli.main(["preview", str(slacs_dir / "slacs0252+0039"), "--out", str(out)]) == 0
     assert out.read_bytes().startswith(b"\x89PNG")
     assert out.stat().st_size < 300_000
+
+
+def test_preview_shows_the_contaminant_circles_as_masked(tmp_path):
+    """The preview greys a sheet's contaminant circles as the fits treat them: the masked
+    count in its title grows by the circle's pixels."""
+    from mgelens.commands.preview import preview_figure
+    from mgelens.imaging import Imaging
+
+    shape = (41, 41)
+    psf = np.zeros((3, 3))
+    psf[1, 1] = 1.0
+    noise = np.ones(shape)
+    noise[:3, :3] = 1e8
+    Imaging(np.ones(shape), noise, psf, 0.05).to_fits(tmp_path / "R1")
+    circles = tmp_path / "circles.txt"
+    circles.write_text("0.3 -0.2 0.2\n")
+    titles = [
+        preview_figure(tmp_path / "R1", circles=c)._suptitle.get_text()
+        for c in ((), ((0.3, -0.2, 0.2),))
+    ]
+    assert "9 masked" in titles[0]
+    assert "58 masked" in titles[1]  # 49 pixel centres within 4 pixels of the circle's
+    out = tmp_path / "preview.png"
+    arguments = ["preview", str(tmp_path / "R1"), "--out", str(out), "--contaminants"]
+    assert cli.main([*arguments, str(circles)]) == 0
+    circles.write_text("0.3 -0.2\n")
+    assert cli.main([*arguments, str(circles)]) == 1
 
 
 def test_preview_of_a_missing_folder_names_it(tmp_path, caplog):

@@ -190,6 +190,13 @@ def imaging_files(wildcards) -> dict:
     return files
 
 
+def contaminants_option(wildcards) -> str:
+    """` --contaminants <file>` from the sheet's `contaminants` column, if the lens has
+    one; else ``""``."""
+    path = contaminant_file(wildcards.lens)
+    return "" if path is None else f" --contaminants {shlex.quote(str(path))}"
+
+
 def pixel_scale_option(wildcards) -> str:
     """` --pixel-scale <arcsec>` from the sheet's `pixel_scale` column, if the lens has one
     (a folder without info.json whose data header has no pixel scale); else ``""``."""
@@ -436,9 +443,7 @@ def phase_options(wildcards) -> str:
     or of the candidate; then the config's sampler seed."""
     row = lens_row(wildcards.lens)
     options = f"--mask-radius {row['mask_radius']}{pixel_scale_option(wildcards)}"
-    contaminants = contaminant_file(wildcards.lens)
-    if contaminants is not None:
-        options += f" --contaminants {shlex.quote(str(contaminants))}"
+    options += contaminants_option(wildcards)
     if wildcards.phase.startswith("light"):
         model = light_model_of(wildcards)
         point = "yes" if model.point_set else "no"

@@ -19,6 +19,7 @@ rule preview:
         mgelens_version=command_version("preview"),
         folder=lens_imaging_folder,
         pixel_scale=pixel_scale_option,
+        contaminants=contaminants_option,
     threads: 1
     resources:
         mem_mb=preview_mem_mb,
@@ -26,7 +27,7 @@ rule preview:
     conda:
         "../envs/mgelens.yaml"
     shell:
-        "mgelens preview {params.folder:q} --out {output:q}{params.pixel_scale} "
+        "mgelens preview {params.folder:q} --out {output:q}{params.pixel_scale}{params.contaminants} "
         "--threads {threads} > {log:q} 2>&1"
 
 

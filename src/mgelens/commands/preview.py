@@ -8,8 +8,9 @@ A mock folder (one holding ``truth.json``, written by ``mgelens simulate``) give
 panels: data, noise map, lens light and lensed source (both after the PSF, with the
 tangential critical curve) and the unlensed source (with the caustic). Any other folder
 of the SLACS layout (``data.fits``, ``noise_map.fits``, ``psf.fits``) gives data, noise
-map and S/N; pixels with noise > 1e3 (the SLACS masked-pixel sentinel) are shown grey.
-All images are drawn with ``origin="lower"``: +x right, +y up (SPEC §1.1).
+map and S/N; pixels with noise > 1e3 (the SLACS masked-pixel sentinel) are shown grey,
+and so are the circles of ``--contaminants`` (the sample sheet's column), as the fits
+treat them. All images are drawn with ``origin="lower"``: +x right, +y up (SPEC §1.1).
 """
 
 import argparse
@@ -26,6 +27,7 @@ from matplotlib.figure import Figure
 from mgelens.atomic import atomic_path
 from mgelens.commands import add_threads_argument
 from mgelens.imaging import Imaging
+from mgelens.mask import contaminants, read_contaminant_circles
 from mgelens.mass import caustic, tangential_critical_curve
 from mgelens.simulate import MOCK_FILES, mass_from_truth
 from mgelens.threads import limit_threads
@@ -52,6 +54,13 @@ def register(subparsers) -> None:
         type=float,
         help="arcsec per pixel (default: the folder's info.json, else the data header)",
     )
+    parser.add_argument(
+        "--contaminants",
+        type=Path,
+        metavar="FILE",
+        help="text file of circles `x y radius` (arcsec) shown as masked, as the fits "
+        "treat them (the sample sheet's contaminants column)",
+    )
     add_threads_argument(parser)
     parser.set_defaults(func=run)
 
@@ -59,7 +68,8 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     limit_threads(args.threads)
     try:
-        figure = preview_figure(args.folder, args.pixel_scale)
+        circles = read_contaminant_circles(args.contaminants) if args.contaminants else ()
+        figure = preview_figure(args.folder, args.pixel_scale, circles)
         with atomic_path(args.out) as temporary:
             figure.savefig(temporary, format="png", dpi=DPI)
     except (ValueError, OSError) as error:
@@ -69,11 +79,18 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def preview_figure(folder: str | Path, pixel_scale: float | None = None) -> Figure:
+def preview_figure(
+    folder: str | Path,
+    pixel_scale: float | None = None,
+    circles: tuple[tuple[float, float, float], ...] = (),
+) -> Figure:
     """The preview figure of an imaging folder (see the module docstring); ``pixel_scale``
-    (arcsec) as in :meth:`~mgelens.imaging.Imaging.from_folder`."""
+    (arcsec) as in :meth:`~mgelens.imaging.Imaging.from_folder`; contaminant ``circles``
+    (x, y, radius in arcsec) shown masked, as the fits treat them."""
     folder = Path(folder)
     imaging = Imaging.from_folder(folder, pixel_scale=pixel_scale)
+    if circles:
+        imaging = contaminants(imaging, circles)
     truth_path = folder / MOCK_FILES["truth"]
     if truth_path.is_file():
         return _mock_figure(folder, imaging, json.loads(truth_path.read_text()))
