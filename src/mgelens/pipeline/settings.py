@@ -369,7 +369,9 @@ _QUICK_SAMPLERS = {
     "spix1": SamplerSettings(n_live=24, plateau_restarts=2, **_QUICK),
     "spix2": SamplerSettings(n_live=12, plateau_restarts=2, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
-    "mass": SamplerSettings(method="nautilus", n_live=30, n_eff=300, f_live=0.05),
+    "mass": SamplerSettings(
+        method="nautilus", n_live=30, n_eff=300, f_live=0.05, peak_restarts=2, peak_tolerance=2.0
+    ),
 }
 """Quick-profile samplers. SP to LIGHT: dynesty random walks (5 steps) with a loose
 stopping criterion; these phases hand their maximum-likelihood model on. SP, the most
@@ -381,7 +383,9 @@ convergence: SPix1 and SPix2 then start afresh with twice the live points, up to
 (24, 48, 96 and 12, 24, 48); the real samples' configs (config/slacs.yaml,
 config/paper.yaml) start SPix2 at 24. MASS, whose posterior is the result: nautilus with
 30 live points per source mesh (two meshes), stopped when the live set holds 5 % of the
-evidence and 300 effective samples are drawn. The measurements behind each choice, and
+evidence and 300 effective samples are drawn; a run whose highest-likelihood sample a
+local search raises by more than 2 in ln L missed the peak of a narrow slope–θ_E ridge
+and is sampled again with 60, then 120 live points (``peak_restarts``). The measurements behind each choice, and
 nautilus tried for SP, are in docs/slam.md, "Quick-profile samplers"."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(

@@ -96,6 +96,10 @@ class SamplerOutput:
         a likelihood plateau. A run that did not converge has an unreliable posterior.
     stop_reason : str
         Why the sampler stopped, in words (recorded in result files).
+    peak_gain : float or None
+        ln L that a local search from the highest-likelihood sample gained
+        (:mod:`mgelens.search.peak_check`; ``SamplerSettings.peak_restarts``); None if
+        the run was not checked.
     """
 
     names: tuple[str, ...]
@@ -113,6 +117,7 @@ class SamplerOutput:
     seed: int
     converged: bool = True
     stop_reason: str = ""
+    peak_gain: float | None = None
 
     def __post_init__(self):
         samples = np.asarray(self.samples, dtype=float).reshape(-1, len(self.names))
@@ -179,6 +184,7 @@ class SamplerOutput:
             "seed": self.seed,
             "converged": self.converged,
             "stop_reason": self.stop_reason,
+            "peak_gain": self.peak_gain,
             "settings": self.settings,
         }
 
@@ -197,7 +203,8 @@ def pool_runs(outputs: Sequence[SamplerOutput]) -> SamplerOutput:
     own errors (in quadrature, divided by K) to the standard deviation of the ln Z values
     (the discretisation scatter). Calls, rejections, runtimes and resumes are summed;
     method, settings and seed are the first run's. The pool converged if every run did;
-    its stop reason lists each run's.
+    its stop reason lists each run's, and its ``peak_gain`` is the largest of the runs'
+    checks (None if none was checked).
 
     Raises
     ------
@@ -236,4 +243,5 @@ def pool_runs(outputs: Sequence[SamplerOutput]) -> SamplerOutput:
         stop_reason="; ".join(
             f"run {k + 1}: {output.stop_reason}" for k, output in enumerate(outputs)
         ),
+        peak_gain=max((o.peak_gain for o in outputs if o.peak_gain is not None), default=None),
     )

@@ -237,6 +237,7 @@ class PhaseResult:
             seed=sampler["seed"],
             converged=sampler.get("converged", True),
             stop_reason=sampler.get("stop_reason", ""),
+            peak_gain=sampler.get("peak_gain"),
         )
         return cls(
             phase=summary["phase"],

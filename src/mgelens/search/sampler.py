@@ -57,6 +57,7 @@ from scipy import special
 
 from mgelens.atomic import atomic_path, write_json
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
+from mgelens.search import peak_check
 from mgelens.search.evaluation import (
     SPAWN,
     Evaluation,
@@ -587,6 +588,21 @@ def run_nested(
     if checkpoint is not None:
         checkpoint.parent.mkdir(parents=True, exist_ok=True)
     evaluation = Evaluation(log_likelihood, space, SPAWN.Array("q", 2))
+    output = _sample_with_plateau_restarts(evaluation, settings, checkpoint, seed, log)
+    if not settings.peak_restarts:
+        return output
+    return _with_peak_restarts(evaluation, settings, checkpoint, seed, log, output)
+
+
+def _sample_with_plateau_restarts(
+    evaluation: Evaluation,
+    settings: SamplerSettings,
+    checkpoint: Path | None,
+    seed: int,
+    log: Callable[[str], None],
+) -> SamplerOutput:
+    """One run of ``settings.method``; a static dynesty run that stops on a plateau is
+    started afresh with more live points (``plateau_restarts``)."""
     if settings.method == "nautilus":
         return _sample_nautilus(evaluation, settings, checkpoint, seed, log)
     output = _sample_dynesty(evaluation, settings, checkpoint, seed, log)
@@ -607,11 +623,81 @@ def run_nested(
     return _with_restarts(attempts, settings.plateau_restarts)
 
 
-def _restart_checkpoint(checkpoint: Path | None, attempt: int) -> Path | None:
-    """Checkpoint of restart ``attempt`` (``<stem>-restart<attempt><suffix>``)."""
+def _restart_checkpoint(
+    checkpoint: Path | None, attempt: int, kind: str = "restart"
+) -> Path | None:
+    """Checkpoint of restart ``attempt`` (``<stem>-<kind><attempt><suffix>``)."""
     if checkpoint is None:
         return None
-    return checkpoint.with_name(f"{checkpoint.stem}-restart{attempt}{checkpoint.suffix}")
+    return checkpoint.with_name(f"{checkpoint.stem}-{kind}{attempt}{checkpoint.suffix}")
+
+
+def _with_peak_restarts(
+    evaluation: Evaluation,
+    settings: SamplerSettings,
+    checkpoint: Path | None,
+    seed: int,
+    log: Callable[[str], None],
+    output: SamplerOutput,
+) -> SamplerOutput:
+    """Check that ``output`` holds the likelihood's peak (:func:`peak_check.peak_gain`);
+    while it does not, sample afresh with twice the live points, up to
+    ``settings.peak_restarts`` times. The last attempt's output, with every attempt's
+    calls, runtimes and resumes summed (the searches' calls too) and its ``peak_gain``;
+    not converged if it still misses the peak."""
+    attempts, searches = [], 0
+    for attempt in range(settings.peak_restarts + 1):
+        if attempt:
+            restart = replace(settings, n_live=settings.n_live * 2**attempt, peak_restarts=0)
+            log(
+                f"{settings.method}: restart {attempt} of {settings.peak_restarts} with "
+                f"{restart.n_live} live points and seed {seed + attempt}: the posterior "
+                "misses the likelihood's peak"
+            )
+            evaluation.counts[:] = [0, 0]
+            output = _sample_with_plateau_restarts(
+                evaluation,
+                restart,
+                _restart_checkpoint(checkpoint, attempt, "peak"),
+                seed + attempt,
+                log,
+            )
+        gain, calls = peak_check.peak_gain(
+            evaluation.counted, evaluation.space, output, settings.peak_evaluations
+        )
+        searches += calls
+        log(
+            f"{settings.method}: a local search from the highest-likelihood sample (ln L "
+            f"{output.log_likelihoods.max():.2f}) gains {gain:.2f} in {calls} calls "
+            f"(tolerance {settings.peak_tolerance})"
+        )
+        attempts.append(replace(output, peak_gain=gain))
+        if gain <= settings.peak_tolerance:
+            break
+    last = attempts[-1]
+    missed = last.peak_gain > settings.peak_tolerance
+    reason = last.stop_reason
+    if len(attempts) > 1:
+        live = ", ".join(str(a.settings["n_live"]) for a in attempts)
+        reason += (
+            f" (attempt {len(attempts)}, live points {live}: the earlier attempts missed the "
+            "likelihood's peak)"
+        )
+    if missed:
+        reason += (
+            f"; a local search from its highest-likelihood sample raised ln L by "
+            f"{last.peak_gain:.2f} (more than {settings.peak_tolerance}): the posterior "
+            "misses the likelihood's peak"
+        )
+    return replace(
+        last,
+        n_calls=sum(a.n_calls for a in attempts) + searches,
+        n_rejected=sum(a.n_rejected for a in attempts),
+        runtime=sum(a.runtime for a in attempts),
+        n_resumes=sum(a.n_resumes for a in attempts),
+        converged=last.converged and not missed,
+        stop_reason=reason,
+    )
 
 
 def _with_restarts(attempts: list[SamplerOutput], plateau_restarts: int) -> SamplerOutput:

@@ -65,6 +65,19 @@ discard_exploration
         own checkpoint (``<stem>-restart<k>``) and its own caps; the output is the last
         attempt's (samples, settings, seed), with the calls, runtimes and resumes of all
         attempts summed and the restarts named in its stop reason.
+    peak_restarts : int
+        0: no check. Otherwise, after the run (any method), a local search from its
+        highest-likelihood sample (:func:`mgelens.search.peak_check.peak_gain`, at most
+        ``peak_evaluations`` calls) checks that the posterior holds the likelihood's peak;
+        if it raises ln L by more than ``peak_tolerance``, the run is started afresh with
+        twice the live points and the next seed (own checkpoint ``<stem>-peak<k>``), up to
+        this many times. The output is the last attempt's, with every attempt's calls
+        (and the searches') summed and ``peak_gain`` recorded; one that still misses its
+        peak is not converged.
+    peak_tolerance : float
+        ln L a check's local search may gain before the run counts as missing its peak.
+    peak_evaluations : int
+        Likelihood calls of one check's local search (about).
 
     The fields from ``checkpoint_every`` on change only how a run is executed, not its
     result, except that a pool (``n_processes > 1``) changes both samplers' random
@@ -96,6 +109,9 @@ discard_exploration
     n_processes: int = 1
     queue_size: int | None = None
     plateau_restarts: int = 0
+    peak_restarts: int = 0
+    peak_tolerance: float = 2.0
+    peak_evaluations: int = 400
 
     def __post_init__(self):
         """Check every field's type and range; a ValueError starts with the field's name."""
@@ -155,6 +171,8 @@ _INTEGER_FIELDS = {
     "n_processes": 1,
     "queue_size": 1,
     "plateau_restarts": 0,
+    "peak_restarts": 0,
+    "peak_evaluations": 1,
 }
 """Integer settings and their minimum."""
 _NUMBER_FIELDS = {
@@ -166,6 +184,7 @@ _NUMBER_FIELDS = {
     "n_eff": {"minimum": 0.0},
     "checkpoint_every": {"minimum": 0.0},
     "progress_every": {"minimum": 0.0},
+    "peak_tolerance": {"minimum": 0.0, "open_minimum": True},
 }
 """Real-valued settings and their range (:func:`mgelens.values.number`)."""
 _OPTIONAL_FIELDS = ("dlogz", "n_effective", "max_iterations", "max_calls", "queue_size")

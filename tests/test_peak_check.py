@@ -1,0 +1,157 @@
+"""The peak check of a nested-sampling run (mgelens.search.peak_check) and the restarts
+it drives in run_nested (SamplerSettings.peak_restarts)."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from mgelens.search import peak_check
+from mgelens.search.model import ParameterSpace
+from mgelens.search.posterior import SamplerOutput, pool_runs
+from mgelens.search.priors import Uniform
+from mgelens.search.sampler import run_nested
+from mgelens.search.sampler_settings import SamplerSettings
+
+SPACE = ParameterSpace.from_priors({"toy.a": Uniform(-5.0, 5.0), "toy.b": Uniform(-5.0, 5.0)})
+PEAK = np.array([0.4, -0.2])
+COVARIANCE = np.array([[0.04, 0.0396], [0.0396, 0.04]])
+"""A narrow ridge: σ 0.2 on each axis, correlation 0.99 (σ 0.028 across the ridge)."""
+PEAK_LOG_L = 100.0
+
+
+def ridge(x: np.ndarray) -> float:
+    offset = np.asarray(x) - PEAK
+    return float(PEAK_LOG_L - 0.5 * offset @ np.linalg.solve(COVARIANCE, offset))
+
+
+def run_around(
+    centre: np.ndarray, n: int = 2000, seed: int = 1, scale: float = 1.0
+) -> SamplerOutput:
+    """Equal-weight samples of the ridge's shape, ``scale`` times its variance, centred on
+    ``centre``: a narrow cloud away from the peak is what a run whose live points stayed
+    on one part of the ridge returns."""
+    samples = np.random.default_rng(seed).multivariate_normal(centre, scale * COVARIANCE, n)
+    return SamplerOutput(
+        names=SPACE.free_names,
+        samples=samples,
+        log_weights=np.full(n, -math.log(n)),
+        log_likelihoods=np.array([ridge(x) for x in samples]),
+        log_evidence=0.0,
+        log_evidence_error=0.1,
+        n_calls=n,
+        n_rejected=0,
+        runtime=1.0,
+        n_resumes=0,
+        method="dynesty_static",
+        settings={"n_live": 10},
+        seed=0,
+    )
+
+
+def test_the_search_climbs_a_ridge_to_a_peak_the_posterior_misses():
+    """A narrow cloud 4σ up the ridge from its peak: the search reaches the analytic peak,
+    and its gain is the peak's ln L minus the best sample's."""
+    along = np.array([0.2, 0.2])  # one σ along the ridge on each axis
+    missed = run_around(PEAK + 4 * along, scale=0.05)
+    gain, calls = peak_check.peak_gain(ridge, SPACE, missed, 400)
+    assert gain == pytest.approx(PEAK_LOG_L - missed.log_likelihoods.max(), abs=0.02)
+    assert gain > 5.0
+    assert 0 < calls <= 420
+    found = run_around(PEAK)
+    gain, _ = peak_check.peak_gain(ridge, SPACE, found, 400)
+    assert gain == pytest.approx(PEAK_LOG_L - found.log_likelihoods.max(), abs=0.02)
+    assert gain < 0.05  # 2,000 samples of a 2-D Gaussian come within ~0.003 of its peak
+
+
+def test_the_search_stays_inside_the_priors():
+    """A peak beyond the prior's edge: the search stops at the edge (the gain is what is
+    reachable inside the support) and never calls the likelihood outside it."""
+    space = ParameterSpace.from_priors({"toy.a": Uniform(-5.0, 0.3), "toy.b": Uniform(-5.0, 5.0)})
+    outside = []
+
+    def guarded(x):
+        if x[0] > 0.3:
+            outside.append(x)
+        return ridge(x)
+
+    missed = run_around(PEAK - 3 * np.array([0.2, 0.2]), scale=0.05)
+    gain, _ = peak_check.peak_gain(guarded, space, missed, 400)
+    assert not outside
+    assert 0.0 < gain < PEAK_LOG_L - missed.log_likelihoods.max()
+
+
+class Gains:
+    """Stands for peak_check.peak_gain: the given gains in turn, 7 calls each."""
+
+    def __init__(self, *gains):
+        self.gains, self.runs = list(gains), []
+
+    def __call__(self, log_likelihood, space, output, max_evaluations):
+        self.runs.append(output)
+        return self.gains.pop(0), 7
+
+
+def gaussian(x):
+    return float(-0.5 * np.sum(((np.asarray(x) - PEAK) / 0.3) ** 2))
+
+
+FAST = SamplerSettings(n_live=20, sample="rwalk", dlogz=0.5, progress_every=1e9)
+
+
+def test_a_run_that_misses_the_peak_restarts_with_twice_the_live_points(monkeypatch):
+    gains = Gains(4.5, 0.3)
+    monkeypatch.setattr(peak_check, "peak_gain", gains)
+    settings = dataclasses.replace(FAST, peak_restarts=2)
+    lines: list[str] = []
+    output = run_nested(gaussian, SPACE, settings, seed=3, log=lines.append)
+    assert any("restart 1 of 2 with 40 live points and seed 4" in line for line in lines)
+    fresh = run_nested(gaussian, SPACE, dataclasses.replace(FAST, n_live=40), seed=4)
+    np.testing.assert_array_equal(output.samples, fresh.samples)
+    assert (output.settings["n_live"], output.seed) == (40, 4)
+    assert output.converged
+    assert output.peak_gain == 0.3
+    first = gains.runs[0]
+    assert output.n_calls == first.n_calls + fresh.n_calls + 2 * 7
+    assert "attempt 2, live points 20, 40" in output.stop_reason
+
+
+def test_a_run_that_keeps_missing_the_peak_is_not_converged(monkeypatch):
+    monkeypatch.setattr(peak_check, "peak_gain", Gains(4.5, 3.0))
+    settings = dataclasses.replace(FAST, peak_restarts=1, peak_tolerance=2.5)
+    output = run_nested(gaussian, SPACE, settings, seed=3, log=lambda _: None)
+    assert not output.converged
+    assert output.peak_gain == 3.0
+    assert "raised ln L by 3.00 (more than 2.5): the posterior misses" in output.stop_reason
+    assert output.statistics()["peak_gain"] == 3.0
+
+
+def test_a_run_that_holds_its_peak_is_kept_as_it_is():
+    """The real check on a converged toy run: it gains almost nothing, so no restart;
+    the run is the one without the check, its calls plus the search's."""
+    settings = dataclasses.replace(FAST, peak_restarts=2)
+    checked = run_nested(gaussian, SPACE, settings, seed=3, log=lambda _: None)
+    plain = run_nested(gaussian, SPACE, FAST, seed=3, log=lambda _: None)
+    np.testing.assert_array_equal(checked.samples, plain.samples)
+    assert checked.converged and checked.settings["n_live"] == 20
+    assert 0.0 <= checked.peak_gain < 0.5
+    assert plain.peak_gain is None
+    assert checked.n_calls > plain.n_calls
+
+
+def test_pooled_runs_keep_the_largest_peak_gain():
+    runs = [
+        dataclasses.replace(run_around(PEAK, 50, seed), peak_gain=g)
+        for seed, g in ((1, 0.2), (2, 1.1))
+    ]
+    assert pool_runs(runs).peak_gain == 1.1
+    assert pool_runs([run_around(PEAK, 50)] * 2).peak_gain is None
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("peak_restarts", -1), ("peak_tolerance", 0.0), ("peak_evaluations", 0)]
+)
+def test_peak_settings_are_validated(field, value):
+    with pytest.raises(ValueError, match=field):
+        SamplerSettings(**{field: value})
