@@ -134,7 +134,8 @@ def test_a_run_that_holds_its_peak_is_kept_as_it_is():
     checked = run_nested(gaussian, SPACE, settings, seed=3, log=lambda _: None)
     plain = run_nested(gaussian, SPACE, FAST, seed=3, log=lambda _: None)
     np.testing.assert_array_equal(checked.samples, plain.samples)
-    assert checked.converged and checked.settings["n_live"] == 20
+    assert checked.converged
+    assert checked.settings["n_live"] == 20
     assert 0.0 <= checked.peak_gain < 0.5
     assert plain.peak_gain is None
     assert checked.n_calls > plain.n_calls
