@@ -156,3 +156,14 @@ def test_pooled_runs_keep_the_largest_peak_gain():
 def test_peak_settings_are_validated(field, value):
     with pytest.raises(ValueError, match=field):
         SamplerSettings(**{field: value})
+
+
+def test_a_run_that_did_not_converge_is_not_checked(monkeypatch):
+    """A capped run is reported as unconverged; more live points would not lift the cap."""
+    gains = Gains(9.0)
+    monkeypatch.setattr(peak_check, "peak_gain", gains)
+    capped = dataclasses.replace(FAST, peak_restarts=2, max_iterations=5)
+    output = run_nested(gaussian, SPACE, capped, seed=3, log=lambda _: None)
+    assert not output.converged
+    assert output.peak_gain is None
+    assert not gains.runs

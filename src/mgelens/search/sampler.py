@@ -589,8 +589,8 @@ def run_nested(
         checkpoint.parent.mkdir(parents=True, exist_ok=True)
     evaluation = Evaluation(log_likelihood, space, SPAWN.Array("q", 2))
     output = _sample_with_plateau_restarts(evaluation, settings, checkpoint, seed, log)
-    if not settings.peak_restarts:
-        return output
+    if not (settings.peak_restarts and output.converged):
+        return output  # an unconverged run (a cap, a plateau) is reported as such
     return _with_peak_restarts(evaluation, settings, checkpoint, seed, log, output)
 
 
@@ -640,9 +640,10 @@ def _with_peak_restarts(
     log: Callable[[str], None],
     output: SamplerOutput,
 ) -> SamplerOutput:
-    """Check that ``output`` holds the likelihood's peak (:func:`peak_check.peak_gain`);
-    while it does not, sample afresh with twice the live points, up to
-    ``settings.peak_restarts`` times. The last attempt's output, with every attempt's
+    """Check that ``output`` (converged) holds the likelihood's peak
+    (:func:`peak_check.peak_gain`); while it does not, sample afresh with twice the live
+    points, up to ``settings.peak_restarts`` times (a restart that does not converge ends
+    the loop). The last attempt's output, with every attempt's
     calls, runtimes and resumes summed (the searches' calls too) and its ``peak_gain``;
     not converged if it still misses the peak."""
     attempts, searches = [], 0
@@ -672,7 +673,7 @@ def _with_peak_restarts(
             f"(tolerance {settings.peak_tolerance})"
         )
         attempts.append(replace(output, peak_gain=gain))
-        if gain <= settings.peak_tolerance:
+        if gain <= settings.peak_tolerance or not output.converged:
             break
     last = attempts[-1]
     missed = last.peak_gain > settings.peak_tolerance

@@ -66,9 +66,10 @@ discard_exploration
         attempt's (samples, settings, seed), with the calls, runtimes and resumes of all
         attempts summed and the restarts named in its stop reason.
     peak_restarts : int
-        0: no check. Otherwise, after the run (any method), a local search from its
-        highest-likelihood sample (:func:`mgelens.search.peak_check.peak_gain`, at most
-        ``peak_evaluations`` calls) checks that the posterior holds the likelihood's peak;
+        0: no check. Otherwise, after a run (any method) that converged, a local search
+        from its highest-likelihood sample (:func:`mgelens.search.peak_check.peak_gain`,
+        at most ``peak_evaluations`` calls) checks that the posterior holds the peak of ln L
+        (an unconverged run, capped or on a plateau, is reported as such, unchecked);
         if it raises ln L by more than ``peak_tolerance``, the run is started afresh with
         twice the live points and the next seed (own checkpoint ``<stem>-peak<k>``), up to
         this many times. The output is the last attempt's, with every attempt's calls
