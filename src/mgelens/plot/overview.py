@@ -130,7 +130,7 @@ def _contaminants(ax: Axes, overview: Overview, extent) -> None:
         interpolation="nearest",
         gid="contaminants",
     )
-    patch = Patch(color=CONTAMINANT_COLOUR, label="ignored (σ = 1e8 / mask.fits)")
+    patch = Patch(color=CONTAMINANT_COLOUR, label="ignored (σ = 1e8, contaminants, mask.fits)")
     ax.legend(handles=[patch], loc="lower left", fontsize="x-small", framealpha=0.8)
 
 
