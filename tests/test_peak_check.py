@@ -2,10 +2,10 @@
 it drives in run_nested (SamplerSettings.peak_restarts)."""
 
 import dataclasses
-import math
 
 import numpy as np
 import pytest
+from sampler_outputs import equal_weight_run
 
 from mgelens.search import peak_check
 from mgelens.search.model import ParameterSpace
@@ -33,21 +33,8 @@ def run_around(
     ``centre``: a narrow cloud away from the peak is what a run whose live points stayed
     on one part of the ridge returns."""
     samples = np.random.default_rng(seed).multivariate_normal(centre, scale * COVARIANCE, n)
-    return SamplerOutput(
-        names=SPACE.free_names,
-        samples=samples,
-        log_weights=np.full(n, -math.log(n)),
-        log_likelihoods=np.array([ridge(x) for x in samples]),
-        log_evidence=0.0,
-        log_evidence_error=0.1,
-        n_calls=n,
-        n_rejected=0,
-        runtime=1.0,
-        n_resumes=0,
-        method="dynesty_static",
-        settings={"n_live": 10},
-        seed=0,
-    )
+    log_likelihoods = np.array([ridge(x) for x in samples])
+    return equal_weight_run(SPACE.free_names, samples, log_likelihoods, {"n_live": 10})
 
 
 def test_the_search_climbs_a_ridge_to_a_peak_the_posterior_misses():

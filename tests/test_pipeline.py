@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from astropy.io import fits
+from sampler_outputs import equal_weight_run
 
 from mgelens import mock_lenses, simulate
 from mgelens.cli import main
@@ -37,7 +38,6 @@ from mgelens.pipeline.settings import (
     settings_from_mapping,
 )
 from mgelens.recovery import true_light_refit
-from mgelens.search.posterior import SamplerOutput
 from mgelens.search.priors import TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult
 from mgelens.source.image_mesh import overlay_centres
@@ -83,21 +83,8 @@ def fake_result(phase, space, centre, scale=0.01, n=400, seed=0) -> PhaseResult:
     rng = np.random.default_rng(seed)
     mean = np.array([centre[name] for name in space.free_names])
     samples = mean + scale * rng.standard_normal((n, mean.size))
-    output = SamplerOutput(
-        names=space.free_names,
-        samples=samples,
-        log_weights=np.full(n, -np.log(n)),
-        log_likelihoods=-0.5 * np.sum(((samples - mean) / scale) ** 2, axis=1),
-        log_evidence=0.0,
-        log_evidence_error=0.1,
-        n_calls=n,
-        n_rejected=0,
-        runtime=1.0,
-        n_resumes=0,
-        method="dynesty_static",
-        settings={},
-        seed=seed,
-    )
+    log_likelihoods = -0.5 * np.sum(((samples - mean) / scale) ** 2, axis=1)
+    output = equal_weight_run(space.free_names, samples, log_likelihoods, seed=seed)
     return PhaseResult(phase, space, output)
 
 
