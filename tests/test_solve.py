@@ -11,7 +11,7 @@ import scipy.optimize
 import scipy.sparse
 from scipy.spatial import KDTree
 
-from mgelens.inversion.cholesky import InversionError
+from mgelens.inversion.cholesky import InversionError, upper_cholesky
 from mgelens.inversion.nnls import _step_to_boundary, reconstruction_positive_only
 from mgelens.inversion.solve import (
     _reduced_solve,
@@ -251,6 +251,33 @@ def test_source_first_factorisation_matches_the_plain_solve(inversion_system, po
     assert joint.log_det_source == pytest.approx(log_det, rel=1e-12)
     with pytest.raises(ValueError, match="source unknowns"):
         solve_linear_system(Q, D, fixed_zero=np.arange(D.size) == 3, source_block=source)
+
+
+def test_a_system_singular_outside_the_source_still_reaches_the_nnls_minimum():
+    """A lens-light column that is zero in the mask (a Gaussian entirely outside it) makes
+    Q singular, so it has no Cholesky factor: the positive-only solve then starts the NNLS
+    from the empty passive set (the zero column never enters) and reaches scipy's NNLS
+    minimum, with ln det of the source block; the unconstrained solve still refuses it."""
+    rng = np.random.default_rng(5)
+    n_pixels, n_source = 400, 30
+    source = np.abs(rng.normal(size=(n_pixels, n_source)))
+    light = np.exp(-np.linspace(0.0, 4.0, n_pixels))[:, None] * np.ones((1, 3))
+    light[:, 1] = 0.0
+    light[:, 2] = np.linspace(1.0, 0.0, n_pixels)
+    design = np.hstack([source, light])
+    data = design @ np.concatenate([rng.uniform(0.5, 1.5, n_source), [0.7, 0.0, 0.3]])
+    data += 0.01 * rng.normal(size=n_pixels)
+    Q, D = design.T @ design, design.T @ data
+    with pytest.raises(InversionError):
+        upper_cholesky(Q.copy())
+    block = slice(0, n_source)
+    solution = solve_linear_system(Q, D, positive_only=True, source_block=block)
+    reference = scipy.optimize.nnls(design, data)[0]
+    np.testing.assert_allclose(design @ solution.x, design @ reference, atol=1e-6)
+    assert (solution.x >= 0.0).all()
+    assert solution.log_det_source == pytest.approx(np.linalg.slogdet(Q[block, block])[1])
+    with pytest.raises(InversionError):
+        solve_linear_system(Q, D, positive_only=False, source_block=block)
 
 
 @pytest.mark.parametrize("edge_step", [37, None])

@@ -230,7 +230,12 @@ def _solve_source_first(
         x[free] = result.x
         return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
     order = np.concatenate([a, e, m])
-    U = upper_cholesky(Q[np.ix_(order, order)])
+    try:
+        U = upper_cholesky(Q[np.ix_(order, order)])
+    except InversionError:
+        if not positive_only:
+            raise
+        return _solve_without_full_factor(Q, reduced_q, reduced_d, free, source_block)
     log_det_source = float(2.0 * np.sum(np.log(np.diag(U)[:n_s])))
     work = np.empty(n)
     if not positive_only:
@@ -245,6 +250,26 @@ def _solve_source_first(
         _reduced_solve(U, n_a, n_s, D[reduced_order], work)
     )
     result = reconstruction_positive_only(reduced_q, reduced_d, unconstrained=unconstrained[free])
+    x[free] = result.x
+    return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
+
+
+def _solve_without_full_factor(
+    Q: np.ndarray,
+    reduced_q: np.ndarray,
+    reduced_d: np.ndarray,
+    free: np.ndarray,
+    source_block: slice,
+) -> LinearSolution:
+    """The positive-only solve of :func:`_solve_source_first` when Q as a whole does not
+    factorise (numerically singular outside the source block: e.g. lens-light columns that
+    are nearly copies of each other, or whose scales differ by ~10¹⁹): the NNLS from the
+    empty passive set, which factorises only the blocks it frees, and ln det of the source
+    block alone. The same minimum; only the unconstrained start is lost."""
+    U = upper_cholesky(Q[source_block, source_block].copy())
+    log_det_source = float(2.0 * np.sum(np.log(np.diag(U))))
+    result = reconstruction_positive_only(reduced_q, reduced_d, use_initial_passive=False)
+    x = np.zeros(free.size)
     x[free] = result.x
     return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
 
