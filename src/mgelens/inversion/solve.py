@@ -221,21 +221,16 @@ def _solve_source_first(
     m = np.flatnonzero(~in_source)
     n_a, n_s = a.size, a.size + e.size
     reduced_q, reduced_d = (Q, D) if free.all() else (Q[np.ix_(free, free)], D[free])
-    x = np.zeros(n)
     if positive_only and start is not None:
-        # the warm-started NNLS needs no factor of Q: only ln det(F_SS + H) is wanted
-        U = upper_cholesky(Q[source_block, source_block].copy())
-        log_det_source = float(2.0 * np.sum(np.log(np.diag(U))))
-        result = reconstruction_positive_only(reduced_q, reduced_d, initial_passive=start)
-        x[free] = result.x
-        return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
+        return _solve_without_factor_of_q(Q, reduced_q, reduced_d, free, source_block, start)
     order = np.concatenate([a, e, m])
     try:
         U = upper_cholesky(Q[np.ix_(order, order)])
     except InversionError:
         if not positive_only:
             raise
-        return _solve_without_full_factor(Q, reduced_q, reduced_d, free, source_block)
+        return _solve_without_factor_of_q(Q, reduced_q, reduced_d, free, source_block, None)
+    x = np.zeros(n)
     log_det_source = float(2.0 * np.sum(np.log(np.diag(U)[:n_s])))
     work = np.empty(n)
     if not positive_only:
@@ -254,21 +249,26 @@ def _solve_source_first(
     return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
 
 
-def _solve_without_full_factor(
+def _solve_without_factor_of_q(
     Q: np.ndarray,
     reduced_q: np.ndarray,
     reduced_d: np.ndarray,
     free: np.ndarray,
     source_block: slice,
+    start: np.ndarray | None,
 ) -> LinearSolution:
-    """The positive-only solve of :func:`_solve_source_first` when Q as a whole does not
-    factorise (numerically singular outside the source block: e.g. lens-light columns that
-    are nearly copies of each other, or whose scales differ by ~10¹⁹): the NNLS from the
-    empty passive set, which factorises only the blocks it frees, and ln det of the source
-    block alone. The same minimum; only the unconstrained start is lost."""
+    """The positive-only solve of :func:`_solve_source_first` without a factor of Q: the
+    NNLS from the passive set ``start`` (None: the empty set), which factorises only the
+    blocks it frees, and ln det of the source block alone (F_SS + H). Taken with a warm
+    start, and when Q as a whole does not factorise (numerically singular outside the
+    source block: lens-light columns that are nearly copies of each other, or whose scales
+    differ by ~10¹⁹); the same minimum, without the unconstrained start."""
     U = upper_cholesky(Q[source_block, source_block].copy())
     log_det_source = float(2.0 * np.sum(np.log(np.diag(U))))
-    result = reconstruction_positive_only(reduced_q, reduced_d, use_initial_passive=False)
+    if start is None:
+        result = reconstruction_positive_only(reduced_q, reduced_d, use_initial_passive=False)
+    else:
+        result = reconstruction_positive_only(reduced_q, reduced_d, initial_passive=start)
     x = np.zeros(free.size)
     x[free] = result.x
     return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)

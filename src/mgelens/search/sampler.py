@@ -643,9 +643,9 @@ def _with_peak_restarts(
     """Check that ``output`` (converged) holds the likelihood's peak
     (:func:`peak_check.peak_gain`); while it does not, sample afresh with twice the live
     points, up to ``settings.peak_restarts`` times (a restart that does not converge ends
-    the loop). The last attempt's output, with every attempt's
-    calls, runtimes and resumes summed (the searches' calls too) and its ``peak_gain``;
-    not converged if it still misses the peak."""
+    the loop). The last attempt's output, with every attempt's calls, runtimes and
+    resumes summed (the searches' calls too) and its ``peak_gain``; not converged if it
+    still misses the peak."""
     attempts, searches = [], 0
     for attempt in range(settings.peak_restarts + 1):
         if attempt:
@@ -679,10 +679,9 @@ def _with_peak_restarts(
     missed = last.peak_gain > settings.peak_tolerance
     reason = last.stop_reason
     if len(attempts) > 1:
-        live = ", ".join(str(a.settings["n_live"]) for a in attempts)
         reason += (
-            f" (attempt {len(attempts)}, live points {live}: the earlier attempts missed the "
-            "likelihood's peak)"
+            f" (attempt {len(attempts)}, live points {_live_points(attempts)}: the earlier "
+            "attempts missed the likelihood's peak)"
         )
     if missed:
         reason += (
@@ -690,14 +689,9 @@ def _with_peak_restarts(
             f"{last.peak_gain:.2f} (more than {settings.peak_tolerance}): the posterior "
             "misses the likelihood's peak"
         )
+    summed = _summed_attempts(attempts, reason)
     return replace(
-        last,
-        n_calls=sum(a.n_calls for a in attempts) + searches,
-        n_rejected=sum(a.n_rejected for a in attempts),
-        runtime=sum(a.runtime for a in attempts),
-        n_resumes=sum(a.n_resumes for a in attempts),
-        converged=last.converged and not missed,
-        stop_reason=reason,
+        summed, n_calls=summed.n_calls + searches, converged=last.converged and not missed
     )
 
 
@@ -707,15 +701,26 @@ def _with_restarts(attempts: list[SamplerOutput], plateau_restarts: int) -> Samp
     last = attempts[-1]
     if len(attempts) == 1:
         return last
-    live = ", ".join(str(a.settings["n_live"]) for a in attempts)
+    return _summed_attempts(
+        attempts,
+        f"{last.stop_reason} (attempt {len(attempts)} of {plateau_restarts + 1}, live "
+        f"points {_live_points(attempts)}: the earlier attempts {PLATEAU_STOP})",
+    )
+
+
+def _live_points(attempts: list[SamplerOutput]) -> str:
+    """The attempts' live points, e.g. "30, 60"."""
+    return ", ".join(str(a.settings["n_live"]) for a in attempts)
+
+
+def _summed_attempts(attempts: list[SamplerOutput], stop_reason: str) -> SamplerOutput:
+    """The last attempt's output with every attempt's calls, rejections, runtimes and
+    resumes summed, and ``stop_reason``."""
     return replace(
-        last,
+        attempts[-1],
         n_calls=sum(a.n_calls for a in attempts),
         n_rejected=sum(a.n_rejected for a in attempts),
         runtime=sum(a.runtime for a in attempts),
         n_resumes=sum(a.n_resumes for a in attempts),
-        stop_reason=(
-            f"{last.stop_reason} (attempt {len(attempts)} of {plateau_restarts + 1}, live "
-            f"points {live}: the earlier attempts {PLATEAU_STOP})"
-        ),
+        stop_reason=stop_reason,
     )
