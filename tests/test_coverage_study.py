@@ -1,0 +1,81 @@
+"""The saved coverage study holds together and meets the issue's targets (issue #30).
+
+A mock's chain takes about 18 minutes of a core, so the suite checks the rows that
+``mgelens coverage`` wrote for the mocks fitted so far, saved in
+``docs/coverage/coverage_lenses.csv`` (how they were made: docs/coverage.md, "The
+saved study"), rather than fitting them again. A target the saved study misses is a
+strict xfail whose reason gives the measured fraction, so that meeting it, or a new
+study that misses another, fails the suite until the table and this file agree.
+"""
+
+import numpy as np
+import pandas as pd
+import pytest
+from workflow_run import ROOT
+
+from mgelens.coverage import PARAMETERS, ROW_COLUMNS, TARGETS, coverage_table, target_table
+
+SAVED = ROOT / "docs" / "coverage" / "coverage_lenses.csv"
+
+MISSED = {
+    "γ inside 3σ": "0.9 of 10 independent mocks: L04's γ 2.549 (2.397–2.720) for 2.375",
+    "γ₂ inside 3σ": "0.9 of 10: L05's γ₂ −0.056 (−0.063 to −0.049) for −0.065",
+    "|median γ − truth| < 0.05": "0.7 of 10: L00 −0.086, L04 +0.173, L05 −0.119",
+    "θ_E within 1 %": "0.9 of 10: L00 −1.5 %",
+}
+"""Targets the saved study does not meet: target name → the measured numbers
+(docs/coverage.md, "The saved study")."""
+
+
+@pytest.fixture(scope="module")
+def rows() -> pd.DataFrame:
+    if not SAVED.is_file():
+        pytest.skip(f"{SAVED} not saved: see docs/coverage.md, 'The saved study'")
+    return pd.read_csv(SAVED)
+
+
+def test_the_saved_rows_are_whole_mocks_of_the_study_sheet(rows):
+    assert list(rows.columns) == [*ROW_COLUMNS, "chain_seconds"]
+    sheet = pd.read_csv(ROOT / "config" / "coverage.tsv", sep="\t", comment="#")
+    assert set(rows["lens"]) <= set(sheet["lens"])
+    for lens, part in rows.groupby("lens"):
+        assert sorted(part["parameter"]) == sorted(PARAMETERS), lens
+    assert (rows.groupby("lens")["chain_seconds"].first() > 0).all()
+
+
+def test_the_saved_flags_and_errors_follow_from_the_intervals(rows):
+    linear = rows[rows["parameter"] != "mass.angle"]
+    assert np.allclose(linear["error"], linear["median"] - linear["truth"], atol=1e-12)
+    for sigma in ("1sigma", "3sigma"):
+        inside = (linear[f"lower_{sigma}"] <= linear["truth"]) & (
+            linear["truth"] <= linear[f"upper_{sigma}"]
+        )
+        assert (inside == linear[f"within_{sigma}"].astype(bool)).all(), sigma
+    angle = rows[rows["parameter"] == "mass.angle"]
+    assert (angle["error"].abs() <= 90.0).all()
+
+
+def test_the_saved_fractions_are_those_of_its_rows(rows):
+    table = coverage_table(rows).set_index("parameter")
+    assert list(table.index) == list(PARAMETERS)
+    n = rows["lens"].nunique()
+    assert (table["n"] == n).all()
+    slope = rows[rows["parameter"] == "mass.slope"]
+    assert table.loc["mass.slope", "within_3sigma"] == pytest.approx(
+        slope["within_3sigma"].astype(bool).mean()
+    )
+
+
+@pytest.mark.parametrize(
+    "target",
+    [
+        pytest.param(t, marks=pytest.mark.xfail(strict=True, reason=MISSED[t.name]))
+        if t.name in MISSED
+        else t
+        for t in TARGETS
+    ],
+    ids=[f"{t.parameter}-{t.condition}" for t in TARGETS],
+)
+def test_the_saved_study_meets_the_target(rows, target):
+    result = target_table(rows, [target]).iloc[0]
+    assert result["met"], f"{target.name}: {result['fraction']:.3f} of {result['n']} mocks"
