@@ -329,6 +329,54 @@ def test_the_held_polish_wins_where_it_reaches_the_higher_posterior(monkeypatch)
     assert value == -34237.7
 
 
+SHAPE_SPACE = ParameterSpace.from_priors(
+    {
+        "mass.einstein_radius": Uniform(0.0, 8.0),
+        "mass.ell_comps_1": Uniform(-1.0, 1.0),
+        "mass.ell_comps_2": Uniform(-1.0, 1.0),
+        "shear.gamma_1": Uniform(-0.3, 0.3),
+        "shear.gamma_2": Uniform(-0.3, 0.3),
+    }
+)
+
+
+def test_the_polish_keeps_the_mass_and_shear_plausible():
+    """slacs1032+5322's case: a likelihood peaked at mass ell_comps (0.82, 0.18) (q ≈ 0.09)
+    and a shear of 0.26 gets the edges of q ≥ 0.3 and |γ| ≤ 0.15 in the direction of its
+    peak (Powell stops somewhere on the edge), not its peak."""
+    peak = np.array([1.2, 0.82, 0.18, 0.18, 0.18])
+
+    def likelihood(x):
+        return -float(np.sum((x - peak) ** 2))
+
+    posterior = sp_start._Posterior(likelihood, SHAPE_SPACE)
+    x, value, _ = sp_start.polish(
+        posterior, np.array([1.2, 0.1, 0.0, 0.0, 0.0]), SHAPE_SPACE.free_names, (0.0, 0.0), 1.2
+    )
+    modulus = (1 - sp_start.MIN_MASS_AXIS_RATIO) / (1 + sp_start.MIN_MASS_AXIS_RATIO)
+    assert np.hypot(x[1], x[2]) == pytest.approx(modulus, abs=0.01)
+    assert np.hypot(x[1], x[2]) <= modulus
+    assert x[1] > 0.4 and x[2] > 0.0  # towards the peak
+    assert np.hypot(x[3], x[4]) == pytest.approx(sp_start.MAX_SHEAR, abs=0.01)
+    assert x[3] > 0.0 and x[4] > 0.0
+    assert x[0] == pytest.approx(1.2, abs=0.01)
+    assert value == pytest.approx(likelihood(x) + SHAPE_SPACE.log_prior(x))
+    assert posterior.plausible is None  # the limits do not outlive the polish
+
+
+def test_plausible_mass_checks_the_named_pairs_only():
+    plausible = sp_start.plausible_mass(SHAPE_SPACE.free_names)
+    q_limit = (1 - 0.3) / (1 + 0.3)
+    assert plausible(np.array([1.0, 0.0, 0.99 * q_limit, 0.1, 0.1]))
+    assert not plausible(np.array([1.0, 0.0, 1.01 * q_limit, 0.0, 0.0]))
+    assert not plausible(np.array([1.0, 0.0, 0.0, 0.11, 0.11]))  # |γ| 0.156
+    only_mass = sp_start.plausible_mass(["mass.einstein_radius", "mass.ell_comps_1",
+                                         "mass.ell_comps_2"])  # fmt: skip
+    assert only_mass(np.array([1.0, 0.3, 0.3]))
+    assert not only_mass(np.array([1.0, 0.6, 0.0]))
+    assert sp_start.plausible_mass(MASS_SPACE.free_names)(np.array([0.0, 0.0, 9.0]))
+
+
 def test_dataset_pixel_centres_are_the_unmasked_pixels(mock_problem):
     dataset: FitDataset = mock_problem.dataset
     x, y = dataset.pixel_centres

@@ -22,8 +22,10 @@ the mass puts it; local optimisers started from round masses fall into the same 
    source centre is the weighted mean of the traced pixels.
 4. **Polish.** Powell over every SP parameter, ln L + ln prior, from that point
    (:data:`POLISH_CALLS` evaluations), the mass centre kept within
-   :data:`MASS_CENTRE_RANGE` of the light centre; twice, once with θ_E free and once
-   held within :data:`ARC_EINSTEIN_RANGE` of the arcs' θ_E, and the higher ln P is kept.
+   :data:`MASS_CENTRE_RANGE` of the light centre, the mass no flatter than
+   :data:`MIN_MASS_AXIS_RATIO` and the shear no stronger than :data:`MAX_SHEAR`; twice,
+   once with θ_E free and once held within :data:`ARC_EINSTEIN_RANGE` of the arcs' θ_E,
+   and the higher ln P is kept.
    Free, Powell's line searches can carry θ_E into a far, worse maximum; held, the
    polish cannot follow arcs that overestimate θ_E (both seen: docs/slacs.md). Both
    polishes run from two points: the arcs' SIE + shear, and the same θ_E with the mass
@@ -61,6 +63,7 @@ from scipy import optimize
 
 from mgelens.atomic import write_json
 from mgelens.fit import FitDataset, fit
+from mgelens.geometry import ell_comps_from
 from mgelens.mass import SIE, ExternalShear, ray_trace
 from mgelens.pipeline import models
 from mgelens.pipeline.parameters import width_of
@@ -85,6 +88,14 @@ MASS_CENTRE_RANGE = 0.3
 """Half-width (arcsec) of the polish's box for the mass centre around the fitted light
 centre: unboxed, the polish can carry the mass far from the light into a mass that
 lenses nothing, where the source draws the arcs unlensed (docs/slacs.md)."""
+MIN_MASS_AXIS_RATIO = 0.3
+"""Flattest mass (axis ratio) the polish may reach. Unbounded, one polish on a real lens
+ended at q ≈ 0.1 against a shear of 0.26, a maximum no galaxy has, and SP spent 60,000
+extra calls climbing out of the priors passed from it (docs/slacs.md, slacs1032+5322).
+SP's own prior is not bounded so: its passed ell_comps prior (width 0.2) reaches beyond."""
+MAX_SHEAR = 0.15
+"""Strongest external shear (magnitude) the polish may reach (see
+:data:`MIN_MASS_AXIS_RATIO`)."""
 ARC_EINSTEIN_RANGE = (0.8, 1.25)
 """θ_E range of the held polish, in units of the arcs' θ_E."""
 LIGHT_ELL_COMPS_RANGE = 0.6
@@ -179,21 +190,30 @@ class SPStart:
 
 
 class _Posterior:
-    """ln L + ln prior of a free vector, counting evaluations; −1e99 off the prior and
-    outside ``box`` (free-vector index → (lower, upper)), which :meth:`boxed` sets."""
+    """ln L + ln prior of a free vector, counting evaluations; −1e99 off the prior,
+    outside ``box`` (free-vector index → (lower, upper)) and where ``plausible`` (a
+    predicate of the free vector) is false, both set by :meth:`boxed`."""
 
     def __init__(self, likelihood: Callable[[np.ndarray], float], space: ParameterSpace):
         self.likelihood, self.space, self.calls = likelihood, space, 0
         self.box: dict[int, tuple[float, float]] = {}
+        self.plausible: Callable[[np.ndarray], bool] | None = None
 
-    def boxed(self, box: dict[int, tuple[float, float]]) -> "_Posterior":
-        """This posterior (sharing its call count) restricted to ``box``."""
-        self.box = dict(box)
+    def boxed(
+        self,
+        box: dict[int, tuple[float, float]],
+        plausible: Callable[[np.ndarray], bool] | None = None,
+    ) -> "_Posterior":
+        """This posterior (sharing its call count) restricted to ``box`` and to the points
+        where ``plausible`` holds (no restriction when ``None``)."""
+        self.box, self.plausible = dict(box), plausible
         return self
 
     def __call__(self, x: np.ndarray) -> float:
         self.calls += 1
         if any(not lower <= x[i] <= upper for i, (lower, upper) in self.box.items()):
+            return REJECTED_LOG_LIKELIHOOD
+        if self.plausible is not None and not self.plausible(x):
             return REJECTED_LOG_LIKELIHOOD
         prior = self.space.log_prior(x)
         if not np.isfinite(prior):
@@ -426,7 +446,8 @@ def polish(
     arcs_einstein_radius: float,
 ) -> tuple[np.ndarray, float, bool]:
     """Step 4: the better of two Powell polishes of every parameter from ``x``, both with
-    the mass centre within :data:`MASS_CENTRE_RANGE` of the light ``centre``, the second
+    the mass centre within :data:`MASS_CENTRE_RANGE` of the light ``centre`` and a
+    plausible mass and shear (:func:`plausible_mass`), the second
     with θ_E within :data:`ARC_EINSTEIN_RANGE` of ``arcs_einstein_radius``. Returns the
     point, its ln P and whether the held polish won (a tie goes to the free one). A mass
     centre tied to the light (``slam.sp_mass_centre: light``) is not among ``names`` and
@@ -440,12 +461,35 @@ def polish(
     theta = names.index("mass.einstein_radius")
     held_box = box | {theta: (low * arcs_einstein_radius, high * arcs_einstein_radius)}
     every = range(len(names))
-    free_x, free_value = _maximise(posterior.boxed(box), x, every, None, POLISH_CALLS)
-    held_x, held_value = _maximise(posterior.boxed(held_box), x, every, None, POLISH_CALLS)
+    plausible = plausible_mass(names)
+    free_x, free_value = _maximise(posterior.boxed(box, plausible), x, every, None, POLISH_CALLS)
+    held_x, held_value = _maximise(
+        posterior.boxed(held_box, plausible), x, every, None, POLISH_CALLS
+    )
     posterior.boxed({})
     if held_value > free_value:
         return held_x, held_value, True
     return free_x, free_value, False
+
+
+def plausible_mass(names: Sequence[str]) -> Callable[[np.ndarray], bool]:
+    """Predicate of a free vector (entries named by ``names``): the mass's axis ratio is at
+    least :data:`MIN_MASS_AXIS_RATIO` and the shear's magnitude at most :data:`MAX_SHEAR`.
+    Parameters absent from ``names`` (fixed) are not checked."""
+    limits = (
+        (("mass.ell_comps_1", "mass.ell_comps_2"), ell_comps_from(MIN_MASS_AXIS_RATIO, 0.0)[0]),
+        (("shear.gamma_1", "shear.gamma_2"), MAX_SHEAR),
+    )
+    checks = [
+        (names.index(first), names.index(second), limit)
+        for (first, second), limit in limits
+        if first in names and second in names
+    ]
+
+    def plausible(x: np.ndarray) -> bool:
+        return all(np.hypot(x[i], x[j]) <= limit for i, j, limit in checks)
+
+    return plausible
 
 
 def started_space(space: ParameterSpace, start: SPStart) -> ParameterSpace:
