@@ -356,9 +356,11 @@ def test_the_polish_keeps_the_mass_and_shear_plausible():
     modulus = (1 - sp_start.MIN_MASS_AXIS_RATIO) / (1 + sp_start.MIN_MASS_AXIS_RATIO)
     assert np.hypot(x[1], x[2]) == pytest.approx(modulus, abs=0.01)
     assert np.hypot(x[1], x[2]) <= modulus
-    assert x[1] > 0.4 and x[2] > 0.0  # towards the peak
+    assert x[1] > 0.4
+    assert x[2] > 0.0
     assert np.hypot(x[3], x[4]) == pytest.approx(sp_start.MAX_SHEAR, abs=0.01)
-    assert x[3] > 0.0 and x[4] > 0.0
+    assert x[3] > 0.0
+    assert x[4] > 0.0
     assert x[0] == pytest.approx(1.2, abs=0.01)
     assert value == pytest.approx(likelihood(x) + SHAPE_SPACE.log_prior(x))
     assert posterior.plausible is None  # the limits do not outlive the polish
@@ -375,6 +377,33 @@ def test_plausible_mass_checks_the_named_pairs_only():
     assert only_mass(np.array([1.0, 0.3, 0.3]))
     assert not only_mass(np.array([1.0, 0.6, 0.0]))
     assert sp_start.plausible_mass(MASS_SPACE.free_names)(np.array([0.0, 0.0, 9.0]))
+
+
+def test_a_start_beyond_the_limits_is_shrunk_to_them_at_its_angle():
+    """M3's case: the light-shaped start takes a light of q < 0.3; the posterior rejects
+    it, and a polish from there would not move. Shrunk inside, it is polished."""
+    names = SHAPE_SPACE.free_names
+    start = np.array([1.1, 0.6, 0.45, 0.0, -0.2])
+    shrunk = sp_start.made_plausible(start, names)
+    q_limit = (1 - sp_start.MIN_MASS_AXIS_RATIO) / (1 + sp_start.MIN_MASS_AXIS_RATIO)
+    assert np.hypot(*shrunk[1:3]) == pytest.approx(q_limit, rel=2e-3)
+    assert np.hypot(*shrunk[1:3]) < q_limit
+    assert shrunk[2] / shrunk[1] == pytest.approx(0.45 / 0.6)
+    assert shrunk[3:] == pytest.approx([0.0, -sp_start.MAX_SHEAR], rel=2e-3)
+    assert shrunk[0] == 1.1
+    assert sp_start.plausible_mass(names)(shrunk)
+    inside = np.array([1.1, 0.2, 0.1, 0.05, 0.0])
+    assert np.array_equal(sp_start.made_plausible(inside, names), inside)
+    assert start[1] == 0.6  # the input is not modified
+
+    peak = np.array([1.0, 0.1, 0.0, 0.02, 0.0])
+
+    def likelihood(x):
+        return -float(np.sum((x - peak) ** 2))
+
+    posterior = sp_start._Posterior(likelihood, SHAPE_SPACE)
+    x, _, _ = sp_start.polish(posterior, start, names, (0.0, 0.0), 1.1)
+    assert x == pytest.approx(peak, abs=0.01)
 
 
 def test_dataset_pixel_centres_are_the_unmasked_pixels(mock_problem):

@@ -96,6 +96,8 @@ SP's own prior is not bounded so: its passed ell_comps prior (width 0.2) reaches
 MAX_SHEAR = 0.15
 """Strongest external shear (magnitude) the polish may reach (see
 :data:`MIN_MASS_AXIS_RATIO`)."""
+PLAUSIBLE_SHRINK = 0.999
+"""A start beyond those limits is shrunk to this fraction of them."""
 ARC_EINSTEIN_RANGE = (0.8, 1.25)
 """θ_E range of the held polish, in units of the arcs' θ_E."""
 LIGHT_ELL_COMPS_RANGE = 0.6
@@ -445,13 +447,13 @@ def polish(
     centre: tuple[float, float],
     arcs_einstein_radius: float,
 ) -> tuple[np.ndarray, float, bool]:
-    """Step 4: the better of two Powell polishes of every parameter from ``x``, both with
-    the mass centre within :data:`MASS_CENTRE_RANGE` of the light ``centre`` and a
-    plausible mass and shear (:func:`plausible_mass`), the second
-    with θ_E within :data:`ARC_EINSTEIN_RANGE` of ``arcs_einstein_radius``. Returns the
-    point, its ln P and whether the held polish won (a tie goes to the free one). A mass
-    centre tied to the light (``slam.sp_mass_centre: light``) is not among ``names`` and
-    needs no box."""
+    """Step 4: the better of two Powell polishes of every parameter from ``x`` (made
+    plausible, :func:`made_plausible`), both with the mass centre within
+    :data:`MASS_CENTRE_RANGE` of the light ``centre`` and a plausible mass and shear
+    (:func:`plausible_mass`), the second with θ_E within :data:`ARC_EINSTEIN_RANGE` of
+    ``arcs_einstein_radius``. Returns the point, its ln P and whether the held polish won
+    (a tie goes to the free one). A mass centre tied to the light
+    (``slam.sp_mass_centre: light``) is not among ``names`` and needs no box."""
     box = {
         names.index(f"mass.{axis}"): (c - MASS_CENTRE_RANGE, c + MASS_CENTRE_RANGE)
         for axis, c in zip(("centre_x", "centre_y"), centre, strict=True)
@@ -462,6 +464,7 @@ def polish(
     held_box = box | {theta: (low * arcs_einstein_radius, high * arcs_einstein_radius)}
     every = range(len(names))
     plausible = plausible_mass(names)
+    x = made_plausible(x, names)
     free_x, free_value = _maximise(posterior.boxed(box, plausible), x, every, None, POLISH_CALLS)
     held_x, held_value = _maximise(
         posterior.boxed(held_box, plausible), x, every, None, POLISH_CALLS
@@ -472,24 +475,43 @@ def polish(
     return free_x, free_value, False
 
 
-def plausible_mass(names: Sequence[str]) -> Callable[[np.ndarray], bool]:
-    """Predicate of a free vector (entries named by ``names``): the mass's axis ratio is at
-    least :data:`MIN_MASS_AXIS_RATIO` and the shear's magnitude at most :data:`MAX_SHEAR`.
-    Parameters absent from ``names`` (fixed) are not checked."""
+def _plausible_pairs(names: Sequence[str]) -> list[tuple[int, int, float]]:
+    """(index, index, largest modulus) of the mass's ell_comps and the shear's components
+    among ``names``; pairs absent from ``names`` (fixed) are left out."""
     limits = (
         (("mass.ell_comps_1", "mass.ell_comps_2"), ell_comps_from(MIN_MASS_AXIS_RATIO, 0.0)[0]),
         (("shear.gamma_1", "shear.gamma_2"), MAX_SHEAR),
     )
-    checks = [
+    return [
         (names.index(first), names.index(second), limit)
         for (first, second), limit in limits
         if first in names and second in names
     ]
 
+
+def plausible_mass(names: Sequence[str]) -> Callable[[np.ndarray], bool]:
+    """Predicate of a free vector (entries named by ``names``): the mass's axis ratio is at
+    least :data:`MIN_MASS_AXIS_RATIO` and the shear's magnitude at most :data:`MAX_SHEAR`.
+    Parameters absent from ``names`` (fixed) are not checked."""
+    checks = _plausible_pairs(names)
+
     def plausible(x: np.ndarray) -> bool:
         return all(np.hypot(x[i], x[j]) <= limit for i, j, limit in checks)
 
     return plausible
+
+
+def made_plausible(x: np.ndarray, names: Sequence[str]) -> np.ndarray:
+    """``x`` with the mass's ell_comps and the shear shrunk, at their angle, to just inside
+    the limits of :func:`plausible_mass` where they exceed them (a polish from a point the
+    posterior rejects would not move: the light-shaped start of M3 takes a light of
+    q < 0.3)."""
+    x = np.array(x, dtype=float)
+    for i, j, limit in _plausible_pairs(names):
+        modulus = np.hypot(x[i], x[j])
+        if modulus > limit:
+            x[[i, j]] *= PLAUSIBLE_SHRINK * limit / modulus
+    return x
 
 
 def started_space(space: ParameterSpace, start: SPStart) -> ParameterSpace:
