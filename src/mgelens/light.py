@@ -459,6 +459,7 @@ def _closed_form_columns(
     """out[p, at[k]]: column k of :func:`blurred_gaussian_columns` at point p; terms whose
     exponent reaches :data:`EXPONENT_CUTOFF` are zero, as in :func:`_gaussian_columns`."""
     n = x.size
+    row = np.empty(n)
     for k in range(precision.shape[0]):
         pxx, pxy, pyy = precision[k, 0], precision[k, 1], precision[k, 2]
         column = at[k]
@@ -489,7 +490,9 @@ def _closed_form_columns(
             exponent = 0.5 * (ux * vx + uy * vy)
             inside = exponent < EXPONENT_CUTOFF
             gaussian = _exp_negative(min(exponent, EXPONENT_CUTOFF), table) * inside
-            out[p, column] = amplitude[k] * gaussian * (1.0 + t3 / 6.0 + t4 / 24.0)
+            row[p] = amplitude[k] * gaussian * (1.0 + t3 / 6.0 + t4 / 24.0)
+        for p in prange(n):
+            out[p, column] = row[p]
 
 
 def geometry_record(centre: tuple[float, float], ell_comps: tuple[float, float]) -> dict:
