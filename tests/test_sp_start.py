@@ -148,8 +148,11 @@ def test_search_finds_the_mocks_mass_from_nothing_but_the_data(mock_problem, moc
     assert abs(values["mass.centre_x"] - light[0]) <= sp_start.MASS_CENTRE_RANGE
     assert abs(values["mass.centre_y"] - light[1]) <= sp_start.MASS_CENTRE_RANGE
     assert mock_start.n_arc_pixels >= sp_start.MIN_ARC_PIXELS
-    # two polishes from each of two starting points
-    assert mock_start.n_calls <= sp_start.LIGHT_CALLS + 4 * sp_start.POLISH_CALLS + 50
+    # the sphere scan, then two polishes from each of three starting points
+    scan_and_polishes = sp_start.EINSTEIN_RADIUS_GRID + 6 * sp_start.POLISH_CALLS
+    assert mock_start.n_calls <= sp_start.LIGHT_CALLS + scan_and_polishes + 50
+    # the sphere of highest ln P lies within one grid step (6 %) of M1's 1.2″
+    assert abs(mock_start.scanned_einstein_radius / truth.einstein_radius - 1) < 0.06
     # the polished point beats the anchor-prior medians and the arcs' start
     space = mock_problem.space
     likelihood = run.PhaseLikelihood(mock_problem.dataset, space, mock_problem.model)
@@ -424,26 +427,83 @@ def test_the_light_shaped_start_has_the_lights_ellipticity_and_no_shear():
     assert start["mass.ell_comps_1"] == 0.37  # the arcs' start is not changed
 
 
-@pytest.mark.parametrize(("values", "chosen"), [((-82720.8, -75084.4), 1), ((-5.0, -5.0), 0)])
+@pytest.mark.parametrize(
+    ("values", "chosen"),
+    [
+        ((-82720.8, -75084.4, -75500.0), 1),
+        ((18157.4, 16160.6, 24000.0), 2),
+        ((-5.0, -5.0, -5.0), 0),
+    ],
+)
 def test_the_start_with_the_higher_polished_posterior_wins(monkeypatch, values, chosen):
     """M3's case (docs/paper_mocks.md): from the arcs' SIE + shear the polish reached ln P
     −82,720.8 in an elongated mass with a strong shear, from the light-shaped mass
-    −75,084.4; a tie keeps the arcs' start."""
-    starts = [np.array([0.0, 0.0, 1.1]), np.array([0.0, 0.0, 1.2])]
+    −75,084.4; slacs1032+5322's: the arcs' θ_E was far too large and the sphere scan's
+    start polishes highest; a tie keeps the earliest start. Each start's held polish
+    stays near its own θ_E."""
+    starts = [(np.array([0.0, 0.0, 1.7]), 1.7), (np.array([0.0, 0.0, 1.8]), 1.7),
+              (np.array([0.0, 0.0, 1.0]), 1.0)]  # fmt: skip
+    held_near = []
 
-    def polish(posterior, x, names, centre, arcs_einstein_radius):
-        index = round(10 * (x[2] - 1.1))
+    def polish(posterior, x, names, centre, einstein_radius):
+        held_near.append(einstein_radius)
+        index = next(i for i, (start, _) in enumerate(starts) if start[2] == x[2])
         return x + 0.01, values[index], index == 0
 
     monkeypatch.setattr(sp_start, "polish", polish)
     posterior = sp_start._Posterior(lambda x: 0.0, MASS_SPACE)
     x, value, held, index = sp_start.polish_starts(
-        posterior, starts, MASS_SPACE.free_names, (0.0, 0.0), 1.1
+        posterior, starts, MASS_SPACE.free_names, (0.0, 0.0)
     )
+    assert held_near == [1.7, 1.7, 1.0]
     assert index == chosen
     assert value == values[chosen]
     assert held is (chosen == 0)
-    assert x == pytest.approx(starts[chosen] + 0.01)
+    assert x == pytest.approx(starts[chosen][0] + 0.01)
+
+
+SCAN_SPACE = ParameterSpace.from_priors(
+    {name: Uniform(-3.0, 3.0) for name in ("mass.centre_x", "mass.centre_y", "mass.ell_comps_1",
+     "mass.ell_comps_2", "shear.gamma_1", "shear.gamma_2", "source.set_0.centre_x",
+     "source.set_0.centre_y")} | {"mass.einstein_radius": Uniform(0.0, 8.0)}
+)  # fmt: skip
+
+
+def test_the_sphere_scan_scores_each_sphere_with_its_traced_source():
+    """A double in the way of slacs1032+5322: the flux of the extended outer image (at
+    1.85″) swamps the inner one (0.8″ on the other side), so the scatter criterion puts
+    θ_E near the outer image; the scan keeps the sphere of highest ln P (here an analytic
+    ln P peaked at the double's 1.325″ with the source where that sphere traces the
+    pixels), round and without shear, with the source on the traced weighted mean."""
+    centre = (0.02, -0.01)
+    rng = np.random.default_rng(4)
+    outer = np.array([1.85, 0.0]) + rng.normal(0.0, 0.25, (400, 2))
+    inner = np.array([-0.8, 0.0]) + rng.normal(0.0, 0.03, (30, 2))
+    x, y = np.concatenate([outer, inner]).T + np.array(centre)[:, None]
+    weight = np.ones(x.size)
+    assert sp_start.arc_mass(x, y, weight, centre, 3.0).sphere_einstein_radius > 1.5
+    truth = 1.325
+
+    def likelihood(vector):
+        v = SCAN_SPACE.values(vector)
+        traced = sp_start._scatter((truth, 0.0, 0.0, 0.0, 0.0), centre, x, y, weight)
+        source = (v["source.set_0.centre_x"] - traced[0]) ** 2 + (
+            v["source.set_0.centre_y"] - traced[1]
+        ) ** 2
+        return -200.0 * (v["mass.einstein_radius"] - truth) ** 2 - source
+
+    posterior = sp_start._Posterior(likelihood, SCAN_SPACE)
+    values = {name: 0.5 for name in SCAN_SPACE.names}
+    point, einstein_radius = sp_start.scanned_start(posterior, values, x, y, weight, centre, 3.0)
+    grid = sp_start._einstein_radius_grid(3.0)
+    assert einstein_radius == grid[np.argmin(np.abs(grid - truth))]
+    assert posterior.calls == sp_start.EINSTEIN_RADIUS_GRID
+    source = sp_start._scatter((einstein_radius, 0.0, 0.0, 0.0, 0.0), centre, x, y, weight)[:2]
+    assert (point["source.set_0.centre_x"], point["source.set_0.centre_y"]) == source
+    assert point["mass.einstein_radius"] == einstein_radius
+    assert (point["mass.centre_x"], point["mass.centre_y"]) == centre
+    assert all(point[n] == 0.0 for n in ("mass.ell_comps_1", "mass.ell_comps_2",
+                                         "shear.gamma_1", "shear.gamma_2"))  # fmt: skip
 
 
 def test_pn_mge_searches_its_start_with_the_non_negative_solve(mock_folder, tmp_path, monkeypatch):

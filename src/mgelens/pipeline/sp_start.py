@@ -20,17 +20,25 @@ the mass puts it; local optimisers started from round masses fall into the same 
    source-plane scatter, in units of θ_E², is least. The SIE ellipticity and shear then
    refine that scatter (Powell; θ_E within 0.8–1.25×, |e| ≤ 0.3, |γ| ≤ 0.1), and the
    source centre is the weighted mean of the traced pixels.
+
+   *Sphere scan (3b).* The scatter misleads where one extended image carries most of the
+   arc flux: a larger θ_E squeezes that image towards the centre and wins, and on
+   slacs1032+5322 (a double) it said 1.58″ for a mass near 1.03″. So the same grid of
+   spheres is also scored by ln P itself (the lens light of step 1, the source centred on
+   the traced arc pixels' weighted mean), 40 evaluations; it peaked at 0.99–1.06″ there.
+   Neither estimate is always the better one (docs/slacs.md), so both start a polish.
 4. **Polish.** Powell over every SP parameter, ln L + ln prior, from that point
    (:data:`POLISH_CALLS` evaluations), the mass centre kept within
    :data:`MASS_CENTRE_RANGE` of the light centre, the mass no flatter than
    :data:`MIN_MASS_AXIS_RATIO` and the shear no stronger than :data:`MAX_SHEAR`; twice,
-   once with θ_E free and once held within :data:`ARC_EINSTEIN_RANGE` of the arcs' θ_E,
-   and the higher ln P is kept.
+   once with θ_E free and once held within :data:`ARC_EINSTEIN_RANGE` of the starting
+   point's θ_E, and the higher ln P is kept.
    Free, Powell's line searches can carry θ_E into a far, worse maximum; held, the
    polish cannot follow arcs that overestimate θ_E (both seen: docs/slacs.md). Both
-   polishes run from two points: the arcs' SIE + shear, and the same θ_E with the mass
-   shaped as the fitted lens light (its first component's ell_comps) and no shear; the
-   highest ln P of the four wins. Where the lens light dominates SP's likelihood, the
+   polishes run from three points (:data:`STARTING_POINTS`): the arcs' SIE + shear; the
+   same θ_E with the mass shaped as the fitted lens light (its first component's
+   ell_comps) and no shear; and the light-shaped mass at the scan's θ_E (step 3b). The
+   highest ln P of the six wins. Where the lens light dominates SP's likelihood, the
    arcs' point alone led into an elongated mass traded against a strong shear, while
    the light-shaped point reaches a far higher maximum near the true mass
    (docs/paper_mocks.md, M3).
@@ -98,6 +106,9 @@ MAX_SHEAR = 0.15
 :data:`MIN_MASS_AXIS_RATIO`)."""
 PLAUSIBLE_SHRINK = 0.999
 """A start beyond those limits is shrunk to this fraction of them."""
+STARTING_POINTS = ("arcs' SIE + shear", "light-shaped mass", "light-shaped sphere scan")
+"""The polishes' starting points of step 4, in order (:func:`search`)."""
+
 ARC_EINSTEIN_RANGE = (0.8, 1.25)
 """θ_E range of the held polish, in units of the arcs' θ_E."""
 LIGHT_ELL_COMPS_RANGE = 0.6
@@ -165,11 +176,16 @@ class SPStart:
     seconds : float
         Wall time of the search.
     held_einstein_radius : bool
-        Whether the polish that won held θ_E near the arcs' (step 4; false in records
-        written before there were two).
+        Whether the polish that won held θ_E near its starting point's (step 4; false in
+        records written before there were two).
     light_shaped_mass : bool
-        Whether the polish that won began from the light-shaped mass (step 4; false in
+        Whether the polish that won began from a light-shaped mass (step 4; false in
         records written before there were two starting points).
+    scanned_einstein_radius : float or None
+        θ_E (arcsec) of the isothermal sphere of highest ln P (step 3b; None in records
+        written before the scan).
+    scanned_mass : bool
+        Whether the polish that won began from that sphere's θ_E (step 4).
     """
 
     values: dict | None
@@ -181,6 +197,8 @@ class SPStart:
     seconds: float
     held_einstein_radius: bool = False
     light_shaped_mass: bool = False
+    scanned_einstein_radius: float | None = None
+    scanned_mass: bool = False
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -313,6 +331,11 @@ def _scatter(parameters, centre, x, y, weight) -> tuple[float, float, float]:
     return mx, my, float(np.average((bx - mx) ** 2 + (by - my) ** 2, weights=weight))
 
 
+def _einstein_radius_grid(radius: float) -> np.ndarray:
+    """The isothermal spheres' θ_E of steps 3 and 3b (arcsec): 0.2″ to 0.9 R, geometric."""
+    return np.geomspace(0.2, ARC_OUTER_FRACTION * radius, EINSTEIN_RADIUS_GRID)
+
+
 def arc_mass(x, y, weight, centre: tuple[float, float], radius: float) -> ArcMass:
     """The SIE + shear and source centre under which the arc pixels trace to one place
     (step 3; arcsec)."""
@@ -320,7 +343,7 @@ def arc_mass(x, y, weight, centre: tuple[float, float], radius: float) -> ArcMas
     def relative(parameters) -> float:
         return _scatter(parameters, centre, x, y, weight)[2] / parameters[0] ** 2
 
-    grid = np.geomspace(0.2, ARC_OUTER_FRACTION * radius, EINSTEIN_RADIUS_GRID)
+    grid = _einstein_radius_grid(radius)
     sphere = float(grid[np.argmin([relative((t, 0.0, 0.0, 0.0, 0.0)) for t in grid])])
     with np.errstate(invalid="ignore"):
         refined = optimize.minimize(
@@ -335,19 +358,54 @@ def arc_mass(x, y, weight, centre: tuple[float, float], radius: float) -> ArcMas
     return ArcMass(len(x), sphere, *parameters, float(sx), float(sy), float(np.sqrt(mean_square)))
 
 
-def _arc_start(values: dict, arcs: ArcMass, centre: tuple[float, float]) -> dict:
+def _mass_start(
+    values: dict, centre: tuple[float, float], parameters: Sequence[float], source: Sequence[float]
+) -> dict:
+    """``values`` with an SIE + shear (``parameters``: θ_E, e₁, e₂, γ₁, γ₂) at ``centre``
+    and the source's centre at ``source`` (arcsec)."""
+    einstein_radius, e1, e2, g1, g2 = parameters
     return {
         **values,
         "mass.centre_x": centre[0],
         "mass.centre_y": centre[1],
-        "mass.einstein_radius": arcs.einstein_radius,
-        "mass.ell_comps_1": arcs.ell_comps_1,
-        "mass.ell_comps_2": arcs.ell_comps_2,
-        "shear.gamma_1": arcs.gamma_1,
-        "shear.gamma_2": arcs.gamma_2,
-        f"{models.SOURCE}.set_0.centre_x": arcs.source_x,
-        f"{models.SOURCE}.set_0.centre_y": arcs.source_y,
+        "mass.einstein_radius": einstein_radius,
+        "mass.ell_comps_1": e1,
+        "mass.ell_comps_2": e2,
+        "shear.gamma_1": g1,
+        "shear.gamma_2": g2,
+        f"{models.SOURCE}.set_0.centre_x": source[0],
+        f"{models.SOURCE}.set_0.centre_y": source[1],
     }
+
+
+def _arc_start(values: dict, arcs: ArcMass, centre: tuple[float, float]) -> dict:
+    parameters = (arcs.einstein_radius, arcs.ell_comps_1, arcs.ell_comps_2, arcs.gamma_1,
+                  arcs.gamma_2)  # fmt: skip
+    return _mass_start(values, centre, parameters, (arcs.source_x, arcs.source_y))
+
+
+def scanned_start(
+    posterior: "_Posterior",
+    values: dict,
+    x: np.ndarray,
+    y: np.ndarray,
+    weight: np.ndarray,
+    centre: tuple[float, float],
+    radius: float,
+) -> tuple[dict, float]:
+    """Step 3b: of the isothermal spheres at the light ``centre`` on the grid of step 3,
+    each with the source centred on the weighted mean of the traced arc pixels
+    (``x``, ``y``, ``weight``) and the rest of ``values``, the one of highest ln P.
+    Returns that point and its θ_E (arcsec)."""
+    best = (-np.inf, None, None)
+    for einstein_radius in _einstein_radius_grid(radius):
+        sphere = (float(einstein_radius), 0.0, 0.0, 0.0, 0.0)
+        source = _scatter(sphere, centre, x, y, weight)[:2]
+        point = _mass_start(values, centre, sphere, source)
+        value = posterior(posterior.space.vector(point))
+        if value > best[0]:
+            best = (value, point, sphere[0])
+    return best[1], best[2]
 
 
 def search(
@@ -385,24 +443,34 @@ def search(
                        time.perf_counter() - began)  # fmt: skip
     arcs = arc_mass(ax, ay, weight, centre, radius)
     arc_start = _arc_start(values, arcs, centre)
-    starts = [space.vector(arc_start), space.vector(light_shaped(arc_start, names))]
-    x, value, held, chosen = polish_starts(posterior, starts, names, centre, arcs.einstein_radius)
-    found = dict(zip(names, x.tolist(), strict=True))
+    scanned, scanned_radius = scanned_start(posterior, values, ax, ay, weight, centre, radius)
     logger.info(
-        "SP start: arcs θ_E %.3f″ (sphere %.3f″), source (%.3f, %.3f)″; polished ln P %.1f "
-        "(from the %s mass, θ_E %s), θ_E %.3f″, %d calls",
+        "SP start: arcs θ_E %.3f″ (sphere %.3f″), source (%.3f, %.3f)″; highest ln P of "
+        "the spheres at θ_E %.3f″",
         arcs.einstein_radius,
         arcs.sphere_einstein_radius,
         arcs.source_x,
         arcs.source_y,
+        scanned_radius,
+    )
+    starts = [
+        (space.vector(arc_start), arcs.einstein_radius),
+        (space.vector(light_shaped(arc_start, names)), arcs.einstein_radius),
+        (space.vector(light_shaped(scanned, names)), scanned_radius),
+    ]
+    x, value, held, chosen = polish_starts(posterior, starts, names, centre)
+    found = dict(zip(names, x.tolist(), strict=True))
+    logger.info(
+        "SP start: polished ln P %.1f (from the %s, θ_E %s), θ_E %.3f″, %d calls",
         value,
-        "light-shaped" if chosen == 1 else "arcs'",
-        "held near the arcs'" if held else "free",
+        STARTING_POINTS[chosen],
+        "held" if held else "free",
         found["mass.einstein_radius"],
         posterior.calls,
     )
     return SPStart(found, value, light_value, arcs, len(ax), posterior.calls,
-                   time.perf_counter() - began, held, chosen == 1)  # fmt: skip
+                   time.perf_counter() - began, held, chosen > 0, scanned_radius,
+                   chosen == 2)  # fmt: skip
 
 
 def light_shaped(start: dict, names: Sequence[str]) -> dict:
@@ -424,17 +492,24 @@ def light_shaped(start: dict, names: Sequence[str]) -> dict:
 
 def polish_starts(
     posterior: _Posterior,
-    starts: Sequence[np.ndarray],
+    starts: Sequence[tuple[np.ndarray, float]],
     names: Sequence[str],
     centre: tuple[float, float],
-    arcs_einstein_radius: float,
 ) -> tuple[np.ndarray, float, bool, int]:
-    """:func:`polish` from each of ``starts``; the highest ln P wins (a tie goes to the
-    earlier start). Returns the point, its ln P, whether the held polish won and the
-    index of the winning start."""
+    """:func:`polish` from each of ``starts`` (a free vector and the θ_E, arcsec, its held
+    polish stays near; in the order of :data:`STARTING_POINTS`); the highest ln P wins (a
+    tie goes to the earlier start). Returns the point, its ln P, whether the held polish
+    won and the index of the winning start."""
     best = None
-    for index, start in enumerate(starts):
-        x, value, held = polish(posterior, start, names, centre, arcs_einstein_radius)
+    for index, (start, einstein_radius) in enumerate(starts):
+        x, value, held = polish(posterior, start, names, centre, einstein_radius)
+        logger.info(
+            "SP start: polish from the %s: ln P %.1f (θ_E %.3f″, %s)",
+            STARTING_POINTS[index],
+            value,
+            x[names.index("mass.einstein_radius")],
+            "held" if held else "free",
+        )
         if best is None or value > best[1]:
             best = (x, value, held, index)
     return best
