@@ -13,9 +13,10 @@ from mgelens.cli import main
 from mgelens.isophotes import IsophoteStatistics, MassShape
 from mgelens.pipeline.model_choice import Candidate, LightModel, choice_record, choose
 from mgelens.plot import save_png
-from mgelens.plot.comparison import einstein_radius_figure
+from mgelens.plot.comparison import einstein_radius_figure, slope_figure
 from mgelens.plot.mosaic import read_panel, residual_mosaic
 from mgelens.plot.summary import histogram_figure
+from mgelens.published import SLOPE_TENSION, slope_differences
 from mgelens.summary import (
     FIT_COLUMNS,
     LIGHT_MODEL_COLUMNS,
@@ -227,6 +228,11 @@ def test_lens_table_converts_and_compares(lens_folders, reference):
     assert epl["slope"] == 2.2
     assert epl["shajib_theta_e"] == 1.5
     assert epl["shajib_theta_e_err_lo"] == 0.03
+    assert (epl["shajib_gamma"], epl["shajib_gamma_err_lo"], epl["shajib_gamma_err_hi"]) == (
+        2.19,
+        0.03,
+        0.05,
+    )
     assert epl["theta_e_over_shajib"] == pytest.approx(expected / 1.5, rel=1e-12)
     assert epl["quality_flag"] == True  # noqa: E712
     mock = table.loc["M1"]
@@ -338,6 +344,52 @@ def test_einstein_radius_figure(lens_folders, reference, tmp_path):
         assert [t.get_text() for t in ax.texts] == ["no published values"]
 
 
+SLOPES = pd.DataFrame(
+    {
+        "lens": ["above", "below", "close", "unpublished"],
+        "slope": [2.40, 1.95, 2.10, 2.0],
+        "slope_err_lo": [0.02, 0.01, 0.02, 0.02],
+        "slope_err_hi": [0.03, 0.04, 0.02, 0.02],
+        "shajib_gamma": [2.10, 2.30, 2.15, math.nan],
+        "shajib_gamma_err_lo": [0.05, 0.10, 0.05, math.nan],
+        "shajib_gamma_err_hi": [0.06, 0.02, 0.05, math.nan],
+        "quality_flag": [False, True, False, False],
+    }
+)
+
+
+def test_slope_differences_use_the_errors_that_face_each_other():
+    differences = slope_differences(SLOPES).set_index("lens")
+    assert list(differences.index) == ["above", "below", "close"]  # no published slope
+    # above: our lower and their upper error; below: our upper and their lower one
+    np.testing.assert_allclose(differences["difference"], [0.30, -0.35, -0.05], atol=1e-12)
+    facing = [math.hypot(0.02, 0.06), math.hypot(0.04, 0.10), math.hypot(0.02, 0.05)]
+    np.testing.assert_allclose(differences["sigma"], facing)
+    # 4.7σ and 3.25σ apart; "close" is 0.9σ apart
+    assert list(differences["tension"]) == [True, True, False]
+    assert SLOPE_TENSION == 3.0
+
+
+def test_slope_figure_names_the_lenses_in_tension(tmp_path):
+    figure = slope_figure(SLOPES)
+    ax = figure.axes[0]
+    assert ax.get_xlabel().startswith("Shajib et al. 2021")
+    assert ax.get_ylabel() == r"mgelens $\gamma$ (MASS)"
+    texts = [t.get_text() for t in ax.texts]
+    assert any(t.startswith("mean γ − γ_Shajib = -0.033 (3 lenses)") for t in texts)
+    names = sorted(t for t in texts if not t.startswith("mean"))
+    assert names == ["above (+4.7σ)", "below (-3.2σ)"]
+    circled = [line for line in ax.lines if line.get_label() == "residuals flagged"]
+    np.testing.assert_allclose(circled[0].get_xydata(), [[2.30, 1.95]])  # x Shajib's, y ours
+    low, high = ax.get_xlim()
+    assert low <= 1.5  # the default range holds every point
+    assert high >= 2.7
+    save_png(figure, tmp_path / "slopes.png")
+    assert (tmp_path / "slopes.png").read_bytes()[:8] == PNG_SIGNATURE
+    empty = slope_figure(SLOPES[SLOPES["lens"] == "unpublished"])
+    assert [t.get_text() for t in empty.axes[0].texts] == ["no published slopes"]
+
+
 def test_residual_mosaic_has_one_panel_per_lens_in_arcsec(lens_folders, tmp_path):
     panels = [
         read_panel(
@@ -373,7 +425,8 @@ def test_residual_mosaic_has_one_panel_per_lens_in_arcsec(lens_folders, tmp_path
 
 def test_summary_command(tmp_path, lens_folders, reference, capsys):
     out = tmp_path / "out"
-    figures = {name: out / f"{name}.png" for name in ("out-figure", "out-einstein", "out-mosaic")}
+    names = ("out-figure", "out-einstein", "out-mosaic", "out-slopes")
+    figures = {name: out / f"{name}.png" for name in names}
     arguments = ["summary", *map(str, lens_folders), "--out-table", str(out / "lenses.csv")]
     arguments += [f"--{name}={path}" for name, path in figures.items()]
     write_choice(lens_folders[0].parent)
@@ -394,6 +447,7 @@ def test_summary_command(tmp_path, lens_folders, reference, capsys):
     assert "light_models_chosen: {'X2+point': 1} (1 by evidence)" in printed
     assert "theta_e_lt_vs_bolton: a = " in printed
     assert "theta_e_lt_vs_shajib: a = 0.958 (1 lens)" in printed
+    assert "slope_vs_shajib: 1 lens, mean difference +0.010, beyond 3 sigma: none" in printed
     assert "(2 lenses)" in printed
     assert main([*arguments, "--reference-dir", str(tmp_path / "absent")]) == 0
     assert pd.read_csv(out / "lenses.csv")["bolton_b_sie"].isna().all()

@@ -16,6 +16,9 @@ Lens ids: our sheets use folder names ``slacs0008-0004``, Bolton ``J0008-0004``,
 Einstein radii: mgelens (as PyAutoGalaxy) stores θ_E^AG; lenstronomy's EPL and Bolton's
 intermediate-axis radius are θ_E^LT = θ_E^AG · √q · (2/(1 + q))^{1/(γ−1)} (SPEC §3.3),
 with q the mass axis ratio and γ the 3D slope (γ = 2: the SIE, factor 2√q/(1 + q)).
+
+Slopes: :func:`slope_differences` sets our γ against Shajib's, in units of the two
+errors combined.
 """
 
 import logging
@@ -187,3 +190,33 @@ def slope_text(slope: float, error: float, n: int) -> str:
     (one lens), ``"1 lens"`` in the singular."""
     spread = f" ± {error:.3f}" if math.isfinite(error) else ""
     return f"a = {slope:.3f}{spread} ({n} {'lens' if n == 1 else 'lenses'})"
+
+
+SLOPE_TENSION = 3.0
+"""Combined 1σ errors beyond which our γ and Shajib's are named as differing."""
+
+
+def slope_differences(table: pd.DataFrame) -> pd.DataFrame:
+    """Our MASS γ against Shajib et al. 2021's imaging-only γ, per lens of a sample table
+    with both (columns ``slope``, ``slope_err_lo``/``_err_hi``, ``shajib_gamma``,
+    ``shajib_gamma_err_lo``/``_err_hi``).
+
+    Returns ``lens``, ``difference`` (ours − Shajib's), ``sigma`` (the errors that face
+    each other, added in quadrature: our upper and their lower error when ours is below,
+    our lower and their upper one when above) and ``tension`` (|difference| / sigma >
+    :data:`SLOPE_TENSION`).
+    """
+    rows = table[np.isfinite(table["slope"]) & np.isfinite(table["shajib_gamma"])]
+    difference = (rows["slope"] - rows["shajib_gamma"]).to_numpy(float)
+    below = difference < 0
+    ours = np.where(below, rows["slope_err_hi"], rows["slope_err_lo"]).astype(float)
+    theirs = np.where(below, rows["shajib_gamma_err_lo"], rows["shajib_gamma_err_hi"]).astype(float)
+    sigma = np.hypot(ours, theirs)
+    return pd.DataFrame(
+        {
+            "lens": rows["lens"].to_numpy(),
+            "difference": difference,
+            "sigma": sigma,
+            "tension": np.abs(difference) > SLOPE_TENSION * sigma,
+        }
+    )

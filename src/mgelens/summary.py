@@ -55,6 +55,7 @@ theta_e_over_bolton             theta_e_lt / bolton_b_sie
 shajib_theta_e                  Shajib et al. 2021 imaging-only power-law θ_E (arcsec, LT)
 shajib_theta_e_err_lo, _err_hi  its 1σ errors
 shajib_gamma                    its slope γ
+shajib_gamma_err_lo, _err_hi    its 1σ errors
 theta_e_over_shajib             theta_e_lt / shajib_theta_e
 quality_statistic               coherence significance K of :mod:`mgelens.quality`
 quality_peak                    largest block |z| / τ
@@ -134,6 +135,8 @@ FIT_COLUMNS = (
     "shajib_theta_e_err_lo",
     "shajib_theta_e_err_hi",
     "shajib_gamma",
+    "shajib_gamma_err_lo",
+    "shajib_gamma_err_hi",
     "theta_e_over_shajib",
     "quality_statistic",
     "quality_peak",
@@ -402,6 +405,8 @@ def lens_table(
     fits["shajib_theta_e_err_lo"] = published["shajib_theta_e_lo"]
     fits["shajib_theta_e_err_hi"] = published["shajib_theta_e_hi"]
     fits["shajib_gamma"] = published["shajib_gamma"]
+    fits["shajib_gamma_err_lo"] = published["shajib_gamma_lo"]
+    fits["shajib_gamma_err_hi"] = published["shajib_gamma_hi"]
     fits["theta_e_over_shajib"] = fits["theta_e_lt"] / published["shajib_theta_e"]
     fits["quality_flag"] = fits["quality_flag"].astype("boolean")
     return pd.concat([table, fits[list(FIT_COLUMNS)]], axis=1)

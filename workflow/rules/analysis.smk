@@ -76,6 +76,11 @@ rule summary:
             caption="../report/residual_mosaic.rst",
             category="Sample",
         ),
+        slopes=report(
+            "results/summary/slopes.png",
+            caption="../report/slopes.rst",
+            category="Sample",
+        ),
         light_models="results/summary/light_models.csv",
     log:
         "logs/summary.log",
@@ -94,7 +99,8 @@ rule summary:
         "mgelens summary {input.summaries:q} --reference-dir {params.reference_dir:q} "
         "--out-table {output.table:q} --out-figure {output.figure:q} "
         "--out-einstein {output.einstein:q} --out-mosaic {output.mosaic:q} "
-        "--out-light-models {output.light_models:q} > {log:q} 2>&1"
+        "--out-slopes {output.slopes:q} --out-light-models {output.light_models:q} "
+        "> {log:q} 2>&1"
 
 
 rule recovery:

@@ -6,6 +6,7 @@ Example::
         --out-table results/summary/lenses.csv --out-figure results/summary/histograms.png \\
         --out-einstein results/summary/einstein_radii.png \\
         --out-mosaic results/summary/residual_mosaic.png \\
+        --out-slopes results/summary/slopes.png \\
         --out-light-models results/summary/light_models.csv
 
 Each ``results/<lens>/isophotes.json`` comes with ``results/<lens>/quality.json`` and
@@ -15,7 +16,8 @@ lens whose LIGHT model was chosen by evidence, ``results/<lens>/model_choice.jso
 (every candidate into ``--out-light-models``, :func:`mgelens.summary.light_model_table`).
 Prints the fraction of lenses with Δq_max > 0.1 or ΔPA_max > 10° (thresholds
 adjustable), the models chosen by evidence, the number of flagged fits and the slopes of
-our θ_E^LT against the published values.
+our θ_E^LT against the published values, and our slopes against Shajib's
+(:func:`mgelens.published.slope_differences`).
 """
 
 import argparse
@@ -26,10 +28,10 @@ from pathlib import Path
 from mgelens.atomic import atomic_path
 from mgelens.pipeline.records import MODEL_FILE
 from mgelens.plot import save_png
-from mgelens.plot.comparison import einstein_radius_figure
+from mgelens.plot.comparison import einstein_radius_figure, slope_figure
 from mgelens.plot.mosaic import read_panel, residual_mosaic
 from mgelens.plot.summary import histogram_figure
-from mgelens.published import slope_text, slope_through_origin
+from mgelens.published import SLOPE_TENSION, slope_differences, slope_text, slope_through_origin
 from mgelens.summary import (
     DELTA_PA_THRESHOLD,
     DELTA_Q_THRESHOLD,
@@ -60,6 +62,9 @@ def register(subparsers) -> None:
     )
     parser.add_argument(
         "--out-mosaic", type=Path, required=True, help="residual mosaic with quality flags (PNG)"
+    )
+    parser.add_argument(
+        "--out-slopes", type=Path, help="our slopes against Shajib et al. 2021's (PNG)"
     )
     parser.add_argument(
         "--out-light-models",
@@ -113,6 +118,8 @@ def run(args: argparse.Namespace) -> int:
             candidates.to_csv(temporary, index=False)
     save_png(histogram_figure(table, args.delta_q, args.delta_pa), args.out_figure)
     save_png(einstein_radius_figure(table), args.out_einstein)
+    if args.out_slopes is not None:
+        save_png(slope_figure(table), args.out_slopes)
     save_png(residual_mosaic(panels), args.out_mosaic)
     measured = int((table["n_isophotes"] > 0).sum())
     fraction = complex_fraction(table, args.delta_q, args.delta_pa)
@@ -128,4 +135,11 @@ def run(args: argparse.Namespace) -> int:
     for name, column in (("bolton", "bolton_b_sie"), ("shajib", "shajib_theta_e")):
         fit = slope_through_origin(table[column], table["theta_e_lt"])
         print(f"theta_e_lt_vs_{name}: {slope_text(*fit)}")
+    slopes = slope_differences(table)
+    print(
+        f"slope_vs_shajib: {len(slopes)} {'lens' if len(slopes) == 1 else 'lenses'}, "
+        "mean difference "
+        f"{slopes['difference'].mean():+.3f}, beyond {SLOPE_TENSION:g} sigma: "
+        f"{', '.join(slopes.loc[slopes['tension'], 'lens']) or 'none'}"
+    )
     return 0
