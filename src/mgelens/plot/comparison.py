@@ -48,6 +48,14 @@ def _outline_flagged(ax: Axes, rows: pd.DataFrame, x: np.ndarray, y: np.ndarray)
                 ax.plot(x[flagged], y[flagged], marker, mfc="none", mec=colour, ms=9, label=name)
 
 
+def _square_with_note(ax: Axes, lo: float, hi: float, note: str, fontsize: int) -> None:
+    """Equal axes over [lo, hi] on both, and ``note`` in the upper left corner."""
+    ax.text(0.04, 0.96, note, transform=ax.transAxes, va="top", fontsize=fontsize)
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(lo, hi)
+    ax.set_aspect("equal")
+
+
 def _panel(ax: Axes, table: pd.DataFrame, column: str, errors: str | None, label: str) -> None:
     ax.set_xlabel(label)
     ax.set_ylabel(r"mgelens $\theta_{\rm E}^{\rm LT}$ [arcsec]")
@@ -69,17 +77,7 @@ def _panel(ax: Axes, table: pd.DataFrame, column: str, errors: str | None, label
     for lens, xi, yi in zip(rows["lens"], x, y, strict=True):
         if abs(yi / xi - 1.0) > OUTLIER:
             ax.annotate(lens, (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7)
-    ax.text(
-        0.04,
-        0.96,
-        f"y = a·x: {slope_text(*slope_through_origin(x, y))}",
-        transform=ax.transAxes,
-        va="top",
-        fontsize=9,
-    )
-    ax.set_xlim(lo, hi)
-    ax.set_ylim(lo, hi)
-    ax.set_aspect("equal")
+    _square_with_note(ax, lo, hi, f"y = a·x: {slope_text(*slope_through_origin(x, y))}", 9)
     # upper left, under the slope: above the band, where only overestimates would lie
     ax.legend(loc="upper left", bbox_to_anchor=(0.02, 0.91), fontsize=8)
 
@@ -135,17 +133,10 @@ def slope_figure(table: pd.DataFrame) -> Figure:
         if tension:
             text = f"{lens} ({difference / sigma:+.1f}σ)"
             ax.annotate(text, (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7)
-    ax.text(
-        0.04,
-        0.96,
+    note = (
         f"mean γ − γ_Shajib = {differences['difference'].mean():+.3f} ({len(rows)} "
-        f"{'lens' if len(rows) == 1 else 'lenses'}); named: beyond {SLOPE_TENSION:g}σ",
-        transform=ax.transAxes,
-        va="top",
-        fontsize=8,
+        f"{'lens' if len(rows) == 1 else 'lenses'}); named: beyond {SLOPE_TENSION:g}σ"
     )
-    ax.set_xlim(lo, hi)
-    ax.set_ylim(lo, hi)
-    ax.set_aspect("equal")
+    _square_with_note(ax, lo, hi, note, 8)
     ax.legend(loc="lower right", fontsize=8)
     return figure
