@@ -451,6 +451,7 @@ def test_summary_command(tmp_path, lens_folders, reference, capsys):
     assert "(2 lenses)" in printed
     assert main([*arguments, "--reference-dir", str(tmp_path / "absent")]) == 0
     assert pd.read_csv(out / "lenses.csv")["bolton_b_sie"].isna().all()
+    assert "slope_vs_shajib: 0 lenses\n" in capsys.readouterr().out
 
 
 def test_summary_command_refuses_lenses_without_fits(tmp_path, summaries, caplog):

@@ -136,6 +136,9 @@ def run(args: argparse.Namespace) -> int:
         fit = slope_through_origin(table[column], table["theta_e_lt"])
         print(f"theta_e_lt_vs_{name}: {slope_text(*fit)}")
     slopes = slope_differences(table)
+    if slopes.empty:
+        print("slope_vs_shajib: 0 lenses")
+        return 0
     print(
         f"slope_vs_shajib: {len(slopes)} {'lens' if len(slopes) == 1 else 'lenses'}, "
         "mean difference "
