@@ -204,7 +204,7 @@ def slope_differences(table: pd.DataFrame) -> pd.DataFrame:
     Returns ``lens``, ``difference`` (ours − Shajib's), ``sigma`` (the errors that face
     each other, added in quadrature: our upper and their lower error when ours is below,
     our lower and their upper one when above) and ``tension`` (|difference| / sigma >
-    :data:`SLOPE_TENSION`).
+    :data:`SLOPE_TENSION`), indexed as those lenses' rows of ``table``.
     """
     rows = table[np.isfinite(table["slope"]) & np.isfinite(table["shajib_gamma"])]
     difference = (rows["slope"] - rows["shajib_gamma"]).to_numpy(float)
@@ -218,5 +218,6 @@ def slope_differences(table: pd.DataFrame) -> pd.DataFrame:
             "difference": difference,
             "sigma": sigma,
             "tension": np.abs(difference) > SLOPE_TENSION * sigma,
-        }
+        },
+        index=rows.index,
     )

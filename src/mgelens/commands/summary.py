@@ -138,11 +138,11 @@ def run(args: argparse.Namespace) -> int:
     slopes = slope_differences(table)
     if slopes.empty:
         print("slope_vs_shajib: 0 lenses")
-        return 0
-    print(
-        f"slope_vs_shajib: {len(slopes)} {'lens' if len(slopes) == 1 else 'lenses'}, "
-        "mean difference "
-        f"{slopes['difference'].mean():+.3f}, beyond {SLOPE_TENSION:g} sigma: "
-        f"{', '.join(slopes.loc[slopes['tension'], 'lens']) or 'none'}"
-    )
+    else:
+        print(
+            f"slope_vs_shajib: {len(slopes)} {'lens' if len(slopes) == 1 else 'lenses'}, "
+            f"mean difference {slopes['difference'].mean():+.3f}, beyond "
+            f"{SLOPE_TENSION:g} sigma: "
+            f"{', '.join(slopes.loc[slopes['tension'], 'lens']) or 'none'}"
+        )
     return 0

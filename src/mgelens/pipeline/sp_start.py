@@ -110,7 +110,8 @@ STARTING_POINTS = ("arcs' SIE + shear", "light-shaped mass", "light-shaped spher
 """The polishes' starting points of step 4, in order (:func:`search`)."""
 
 ARC_EINSTEIN_RANGE = (0.8, 1.25)
-"""θ_E range of the held polish, in units of the arcs' θ_E."""
+"""θ_E range of the held polish, in units of its starting point's θ_E (the arcs' or the
+sphere scan's)."""
 LIGHT_ELL_COMPS_RANGE = 0.6
 """Bound of |ell_comps| in the lens-light stage."""
 ARC_SIGNIFICANCE = 3.0
@@ -385,7 +386,7 @@ def _arc_start(values: dict, arcs: ArcMass, centre: tuple[float, float]) -> dict
 
 
 def scanned_start(
-    posterior: "_Posterior",
+    posterior: _Posterior,
     values: dict,
     x: np.ndarray,
     y: np.ndarray,
@@ -520,14 +521,14 @@ def polish(
     x: np.ndarray,
     names: Sequence[str],
     centre: tuple[float, float],
-    arcs_einstein_radius: float,
+    einstein_radius: float,
 ) -> tuple[np.ndarray, float, bool]:
     """Step 4: the better of two Powell polishes of every parameter from ``x`` (made
     plausible, :func:`made_plausible`), both with the mass centre within
     :data:`MASS_CENTRE_RANGE` of the light ``centre`` and a plausible mass and shear
     (:func:`plausible_mass`), the second with θ_E within :data:`ARC_EINSTEIN_RANGE` of
-    ``arcs_einstein_radius``. Returns the point, its ln P and whether the held polish won
-    (a tie goes to the free one). A mass centre tied to the light
+    ``einstein_radius`` (the starting point's, arcsec). Returns the point, its ln P and
+    whether the held polish won (a tie goes to the free one). A mass centre tied to the light
     (``slam.sp_mass_centre: light``) is not among ``names`` and needs no box."""
     box = {
         names.index(f"mass.{axis}"): (c - MASS_CENTRE_RANGE, c + MASS_CENTRE_RANGE)
@@ -536,7 +537,7 @@ def polish(
     }
     low, high = ARC_EINSTEIN_RANGE
     theta = names.index("mass.einstein_radius")
-    held_box = box | {theta: (low * arcs_einstein_radius, high * arcs_einstein_radius)}
+    held_box = box | {theta: (low * einstein_radius, high * einstein_radius)}
     every = range(len(names))
     plausible = plausible_mass(names)
     x = made_plausible(x, names)

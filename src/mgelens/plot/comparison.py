@@ -111,10 +111,11 @@ def slope_figure(table: pd.DataFrame) -> Figure:
     ax = figure.subplots()
     ax.set_xlabel(r"Shajib et al. 2021 $\gamma$ (imaging only)")
     ax.set_ylabel(r"mgelens $\gamma$ (MASS)")
-    rows = table[np.isfinite(table["slope"]) & np.isfinite(table["shajib_gamma"])]
-    if rows.empty:
+    differences = slope_differences(table)
+    if differences.empty:
         ax.text(0.5, 0.5, "no published slopes", transform=ax.transAxes, ha="center")
         return figure
+    rows = table.loc[differences.index]
     x, y = rows["shajib_gamma"].to_numpy(float), rows["slope"].to_numpy(float)
     lo = min(SLOPE_RANGE[0], x.min() - 0.1, y.min() - 0.1)
     hi = max(SLOPE_RANGE[1], x.max() + 0.1, y.max() + 0.1)
@@ -123,7 +124,6 @@ def slope_figure(table: pd.DataFrame) -> Figure:
     yerr = rows[["slope_err_lo", "slope_err_hi"]].to_numpy(float).T
     ax.errorbar(x, y, xerr=xerr, yerr=yerr, fmt="o", markersize=4, color="tab:blue")
     _outline_flagged(ax, rows, x, y)
-    differences = slope_differences(rows)
     for (lens, tension, difference, sigma), xi, yi in zip(
         differences[["lens", "tension", "difference", "sigma"]].itertuples(index=False),
         x,
