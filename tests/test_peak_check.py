@@ -110,7 +110,7 @@ def test_a_run_that_keeps_missing_the_peak_is_not_converged(monkeypatch):
     output = run_nested(gaussian, SPACE, settings, seed=3, log=lambda _: None)
     assert not output.converged
     assert output.peak_gain == 3.0
-    assert "raised ln L by 3.00 (more than 2.5): the posterior misses" in output.stop_reason
+    assert "ln L 3.00 above its highest-likelihood sample (more than 2.5)" in output.stop_reason
     assert output.statistics()["peak_gain"] == 3.0
 
 
@@ -128,6 +128,51 @@ def test_a_run_that_holds_its_peak_is_kept_as_it_is():
     assert checked.n_calls > plain.n_calls
 
 
+REFERENCE = np.array([-3.0, 3.0])
+"""A point 10σ from the Gaussian's peak (ln L −100 there), where a spike can hide."""
+
+
+def spiked(x):
+    """The Gaussian, with ln L 10 at exactly :data:`REFERENCE`: a peak no run can find."""
+    return 10.0 if np.array_equal(x, REFERENCE) else gaussian(x)
+
+
+def no_search(*_):
+    raise AssertionError("peak_evaluations = 0 runs no local search")
+
+
+def test_a_run_below_its_reference_point_samples_again(monkeypatch):
+    """The reference's ln L (10) is far above every sample's (≤ 0): the run misses it, is
+    sampled again with twice the live points, misses again and is not converged; the
+    reference costs one call, and no local search runs."""
+    monkeypatch.setattr(peak_check, "peak_gain", no_search)
+    settings = dataclasses.replace(FAST, peak_restarts=1, peak_evaluations=0)
+    lines: list[str] = []
+    output = run_nested(spiked, SPACE, settings, seed=3, log=lines.append, reference=REFERENCE)
+    first = run_nested(spiked, SPACE, FAST, seed=3, log=lambda _: None)
+    second = run_nested(spiked, SPACE, dataclasses.replace(FAST, n_live=40), seed=4)
+    np.testing.assert_array_equal(output.samples, second.samples)
+    assert any("restart 1 of 1 with 40 live points and seed 4" in line for line in lines)
+    assert any("the reference point has ln L 10.00" in line for line in lines)
+    assert output.n_calls == first.n_calls + second.n_calls + 1
+    assert output.peak_gain == pytest.approx(10.0 - second.log_likelihoods.max())
+    assert not output.converged
+    assert f"found ln L {output.peak_gain:.2f} above its highest-likelihood" in output.stop_reason
+
+
+def test_a_run_above_its_reference_point_is_kept_as_it_is(monkeypatch):
+    """A reference in the far tail (ln L −100) says nothing against the run: no restart,
+    the run without the check plus one call, a peak gain of 0."""
+    monkeypatch.setattr(peak_check, "peak_gain", no_search)
+    settings = dataclasses.replace(FAST, peak_restarts=1, peak_evaluations=0)
+    checked = run_nested(gaussian, SPACE, settings, seed=3, log=lambda _: None, reference=REFERENCE)
+    plain = run_nested(gaussian, SPACE, FAST, seed=3, log=lambda _: None)
+    np.testing.assert_array_equal(checked.samples, plain.samples)
+    assert checked.converged
+    assert checked.peak_gain == 0.0
+    assert checked.n_calls == plain.n_calls + 1
+
+
 def test_pooled_runs_keep_the_largest_peak_gain():
     runs = [
         dataclasses.replace(run_around(PEAK, 50, seed), peak_gain=g)
@@ -138,7 +183,7 @@ def test_pooled_runs_keep_the_largest_peak_gain():
 
 
 @pytest.mark.parametrize(
-    ("field", "value"), [("peak_restarts", -1), ("peak_tolerance", 0.0), ("peak_evaluations", 0)]
+    ("field", "value"), [("peak_restarts", -1), ("peak_tolerance", 0.0), ("peak_evaluations", -1)]
 )
 def test_peak_settings_are_validated(field, value):
     with pytest.raises(ValueError, match=field):

@@ -534,3 +534,25 @@ def test_pn_mge_searches_its_start_with_the_non_negative_solve(mock_folder, tmp_
     assert seen["likelihood"](x) == pytest.approx(nn_value, rel=1e-12)
     # the unconstrained solve fits at least as well: a different likelihood
     assert pn_value > nn_value + 1.0
+
+
+def test_sps_sampler_checks_its_posterior_against_the_start(
+    mock_problem, mock_start, tmp_path, monkeypatch
+):
+    """The start is SP's reference point: run_nested receives its vector in the started
+    space, and the quick profile's SP samples again if its posterior falls short of it."""
+    monkeypatch.setattr(sp_start, "search", lambda *_: mock_start)
+    started = run.started_sp(mock_problem, tmp_path, {})
+    assert started.reference == mock_start.values
+    seen = []
+
+    def sampled(likelihood, space, sampler, checkpoint, seed, log, reference):
+        seen.append(reference)
+        raise RuntimeError("stop before sampling")
+
+    monkeypatch.setattr(run, "run_nested", sampled)
+    sampler = profile_settings("quick").samplers["sp"]
+    with pytest.raises(RuntimeError, match="stop before sampling"):
+        run._sample_problems([started], sampler, [0], [tmp_path / "c.pickle"], tmp_path, tmp_path)
+    np.testing.assert_array_equal(seen[0], started.space.vector(mock_start.values))
+    assert (sampler.peak_restarts, sampler.peak_evaluations) == (1, 0)

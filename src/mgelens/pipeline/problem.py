@@ -216,6 +216,9 @@ class PhaseProblem:
     inputs: tuple[Path, ...]
     mask_radius: float
     positions: models.PositionsPenalty | None = None
+    reference: dict[str, float] | None = None
+    """Values whose ln L the sampled posterior must reach (SP's start; the sampler's peak
+    check, ``SamplerSettings.peak_restarts``)."""
 
 
 def positions_penalty(sp: EarlierPhase, settings: SlamSettings) -> models.PositionsPenalty | None:

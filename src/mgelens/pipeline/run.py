@@ -220,6 +220,7 @@ def _sample_alone(
     sampler: SamplerSettings,
     checkpoint: Path,
     seed: int,
+    reference: np.ndarray | None,
     folder: Path,
 ) -> SamplerOutput:
     """One run of :func:`_sample_runs` in a worker process set up as a phase job
@@ -227,15 +228,16 @@ def _sample_alone(
     to the phase log."""
     prepare_worker_process()
     with phase_log(folder):
-        return run_nested(likelihood, space, sampler, checkpoint, seed, logger.info)
+        return run_nested(likelihood, space, sampler, checkpoint, seed, logger.info, reference)
 
 
 def _sample_runs(
-    runs: list[tuple[PhaseLikelihood, ParameterSpace, Path, int]],
+    runs: list[tuple[PhaseLikelihood, ParameterSpace, Path, int, np.ndarray | None]],
     sampler: SamplerSettings,
     folder: Path,
 ) -> list[SamplerOutput]:
-    """Sample each run ``(likelihood, space, checkpoint, seed)`` with ``sampler``.
+    """Sample each run ``(likelihood, space, checkpoint, seed, reference)`` with ``sampler``
+    (:func:`~mgelens.search.sampler.run_nested`).
 
     One after the other; or, when there are several runs (MASS's source meshes) and the
     sampler has ``n_processes`` ≥ 2, up to ``n_processes`` of them side by side in worker
@@ -248,16 +250,16 @@ def _sample_runs(
     n_workers = min(sampler.n_processes, len(runs))
     if n_workers < 2:
         return [
-            run_nested(likelihood, space, sampler, checkpoint, seed, logger.info)
-            for likelihood, space, checkpoint, seed in runs
+            run_nested(likelihood, space, sampler, checkpoint, seed, logger.info, reference)
+            for likelihood, space, checkpoint, seed, reference in runs
         ]
     alone = dataclasses.replace(sampler, n_processes=1)
     logger.info("sampling the %d runs %d at a time, one process each", len(runs), n_workers)
     with SPAWN.Pool(n_workers) as pool:
         return pool.starmap(
             _sample_alone,
-            [(likelihood, space, alone, checkpoint, seed, folder)
-             for likelihood, space, checkpoint, seed in runs],
+            [(likelihood, space, alone, checkpoint, seed, reference, folder)
+             for likelihood, space, checkpoint, seed, reference in runs],
         )  # fmt: skip
 
 
@@ -335,7 +337,8 @@ def _sample_problems(
             problem.positions,
             reference_passive_set(problem),
         )
-        runs.append((likelihood, problem.space, checkpoint, run_seed))
+        reference = None if problem.reference is None else problem.space.vector(problem.reference)
+        runs.append((likelihood, problem.space, checkpoint, run_seed, reference))
     return _sample_runs(runs, sampler, folder)
 
 
@@ -529,7 +532,10 @@ def started_sp(problem: PhaseProblem, folder: Path, checksums: dict) -> PhasePro
     """SP's problem with its priors passed from the arcs' start (:mod:`sp_start`), read
     from ``folder/start.json`` when it was found for the same inputs (``checksums``, of
     ``problem.inputs``) and settings. The search solves non-negatively whatever SP's
-    ``positive_only`` (:meth:`~mgelens.fit.FitDataset.non_negative`)."""
+    ``positive_only`` (:meth:`~mgelens.fit.FitDataset.non_negative`). The start is the
+    problem's ``reference``: a sampler with a peak check samples again if its posterior
+    falls short of the start's ln L (on slacs1627-0053 one fell 83 short, in another
+    mode; docs/slacs.md)."""
     fingerprint = problem_fingerprint(problem, checksums)
     dataset = problem.dataset.non_negative()
     likelihood = PhaseLikelihood(dataset, problem.space, problem.model)
@@ -544,7 +550,9 @@ def started_sp(problem: PhaseProblem, folder: Path, checksums: dict) -> PhasePro
             problem.mask_radius,
         ),
     )
-    return dataclasses.replace(problem, space=sp_start.started_space(problem.space, start))
+    return dataclasses.replace(
+        problem, space=sp_start.started_space(problem.space, start), reference=start.values
+    )
 
 
 def chain_settings(name: str, settings: SlamSettings) -> list[SlamSettings]:

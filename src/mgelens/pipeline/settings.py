@@ -365,7 +365,7 @@ _PAPER_SAMPLERS = {
 
 _QUICK = {"method": "dynesty_static", "sample": "rwalk", "dlogz": 1.0}
 _QUICK_SAMPLERS = {
-    "sp": SamplerSettings(n_live=60, **_QUICK),
+    "sp": SamplerSettings(n_live=60, peak_restarts=1, peak_evaluations=0, **_QUICK),
     "spix1": SamplerSettings(n_live=24, plateau_restarts=2, **_QUICK),
     "spix2": SamplerSettings(n_live=12, plateau_restarts=2, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
@@ -375,7 +375,10 @@ _QUICK_SAMPLERS = {
 }
 """Quick-profile samplers. SP to LIGHT: dynesty random walks (5 steps) with a loose
 stopping criterion; these phases hand their maximum-likelihood model on. SP, the most
-multimodal phase (17 parameters), uses 60 live points, SPix1 3 n_dim (24), SPix2 and
+multimodal phase (17 parameters), uses 60 live points, and is sampled again with 120
+if its posterior falls more than 2 in ln L short of its start (``peak_restarts`` with
+the start as the reference point, no local search: on slacs1627-0053 60 live points
+settled in a mode 83 below the start's); SPix1 3 n_dim (24), SPix2 and
 LIGHT about 2 n_dim + 2 (dynesty needs more than 2 n_dim). ln ε has spikes over SPix2's
 k-means weights, and over SPix1's mass when the lens light is unconstrained (pn-MGE), on
 which the walks can collapse, every live point a copy of one, and stop short of

@@ -554,6 +554,7 @@ def run_nested(
     checkpoint_path: str | Path | None = None,
     seed: int = 0,
     log: Callable[[str], None] | None = None,
+    reference: np.ndarray | None = None,
 ) -> SamplerOutput:
     """Sample the posterior of ``space`` under ``log_likelihood`` and estimate ln Z.
 
@@ -575,6 +576,10 @@ def run_nested(
         Seed of the sampler's random generator.
     log : callable, optional
         Receives progress lines (default: ``logging.getLogger("mgelens.search").info``).
+    reference : array, optional
+        A free-parameter vector whose ln L a converged run must reach within
+        ``settings.peak_tolerance`` (e.g. the maximum an optimiser found before sampling);
+        checked, with one likelihood call, only when ``settings.peak_restarts`` > 0.
 
     Returns
     -------
@@ -591,7 +596,7 @@ def run_nested(
     output = _sample_with_plateau_restarts(evaluation, settings, checkpoint, seed, log)
     if not (settings.peak_restarts and output.converged):
         return output  # an unconverged run (a cap, a plateau) is reported as such
-    return _with_peak_restarts(evaluation, settings, checkpoint, seed, log, output)
+    return _with_peak_restarts(evaluation, settings, checkpoint, seed, log, output, reference)
 
 
 def _sample_with_plateau_restarts(
@@ -639,14 +644,17 @@ def _with_peak_restarts(
     seed: int,
     log: Callable[[str], None],
     output: SamplerOutput,
+    reference: np.ndarray | None,
 ) -> SamplerOutput:
     """Check that ``output`` (converged) holds the likelihood's peak
-    (:func:`peak_check.peak_gain`); while it does not, sample afresh with twice the live
-    points, up to ``settings.peak_restarts`` times (a restart that does not converge ends
-    the loop). The last attempt's output, with every attempt's calls, runtimes and
-    resumes summed (the searches' calls too) and its ``peak_gain``; not converged if it
-    still misses the peak."""
-    attempts, searches = [], 0
+    (:func:`_peak_gain`); while it does not, sample afresh with twice the live points, up
+    to ``settings.peak_restarts`` times (a restart that does not converge ends the loop).
+    The last attempt's output, with every attempt's calls, runtimes and resumes summed
+    (the checks' calls too) and its ``peak_gain``; not converged if it still misses the
+    peak."""
+    attempts = []
+    searches = 0 if reference is None else 1
+    reference_log_likelihood = None if reference is None else evaluation.counted(reference)
     for attempt in range(settings.peak_restarts + 1):
         if attempt:
             restart = replace(settings, n_live=settings.n_live * 2**attempt, peak_restarts=0)
@@ -663,15 +671,8 @@ def _with_peak_restarts(
                 seed + attempt,
                 log,
             )
-        gain, calls = peak_check.peak_gain(
-            evaluation.counted, evaluation.space, output, settings.peak_evaluations
-        )
+        gain, calls = _peak_gain(evaluation, settings, output, reference_log_likelihood, log)
         searches += calls
-        log(
-            f"{settings.method}: a local search from the highest-likelihood sample (ln L "
-            f"{output.log_likelihoods.max():.2f}) gains {gain:.2f} in {calls} calls "
-            f"(tolerance {settings.peak_tolerance})"
-        )
         attempts.append(replace(output, peak_gain=gain))
         if gain <= settings.peak_tolerance or not output.converged:
             break
@@ -685,14 +686,45 @@ def _with_peak_restarts(
         )
     if missed:
         reason += (
-            f"; a local search from its highest-likelihood sample raised ln L by "
-            f"{last.peak_gain:.2f} (more than {settings.peak_tolerance}): the posterior "
-            "misses the likelihood's peak"
+            f"; its peak check found ln L {last.peak_gain:.2f} above its highest-likelihood "
+            f"sample (more than {settings.peak_tolerance}): the posterior misses the "
+            "likelihood's peak"
         )
     summed = _summed_attempts(attempts, reason)
     return replace(
         summed, n_calls=summed.n_calls + searches, converged=last.converged and not missed
     )
+
+
+def _peak_gain(
+    evaluation: Evaluation,
+    settings: SamplerSettings,
+    output: SamplerOutput,
+    reference_log_likelihood: float | None,
+    log: Callable[[str], None],
+) -> tuple[float, int]:
+    """How far ln L rises above ``output``'s highest-likelihood sample: by a local search
+    from it (:func:`peak_check.peak_gain`, unless ``settings.peak_evaluations`` is 0) and
+    at the reference point; the larger gain (≥ 0) and the search's calls."""
+    best = float(output.log_likelihoods.max())
+    gain, calls = 0.0, 0
+    if settings.peak_evaluations:
+        gain, calls = peak_check.peak_gain(
+            evaluation.counted, evaluation.space, output, settings.peak_evaluations
+        )
+        log(
+            f"{settings.method}: a local search from the highest-likelihood sample (ln L "
+            f"{best:.2f}) gains {gain:.2f} in {calls} calls (tolerance {settings.peak_tolerance})"
+        )
+    if reference_log_likelihood is not None:
+        shortfall = reference_log_likelihood - best
+        log(
+            f"{settings.method}: the reference point has ln L {reference_log_likelihood:.2f}, "
+            f"{shortfall:+.2f} against the highest-likelihood sample (tolerance "
+            f"{settings.peak_tolerance})"
+        )
+        gain = max(gain, shortfall)
+    return gain, calls
 
 
 def _with_restarts(attempts: list[SamplerOutput], plateau_restarts: int) -> SamplerOutput:

@@ -69,16 +69,19 @@ discard_exploration
         0: no check. Otherwise, after a run (any method) that converged, a local search
         from its highest-likelihood sample (:func:`mgelens.search.peak_check.peak_gain`,
         at most ``peak_evaluations`` calls) checks that the posterior holds the peak of ln L
-        (an unconverged run, capped or on a plateau, is reported as such, unchecked);
-        if it raises ln L by more than ``peak_tolerance``, the run is started afresh with
-        twice the live points and the next seed (own checkpoint ``<stem>-peak<k>``), up to
-        this many times. The output is the last attempt's, with every attempt's calls
-        (and the searches') summed and ``peak_gain`` recorded; one that still misses its
-        peak is not converged.
+        (an unconverged run, capped or on a plateau, is reported as such, unchecked), and
+        so does the ``reference`` point given to :func:`~mgelens.search.sampler.run_nested`
+        (SP's start): the run's peak gain is the larger of the search's gain and the
+        reference's ln L above the run's highest. If it exceeds ``peak_tolerance``, the run
+        is started afresh with twice the live points and the next seed (own checkpoint
+        ``<stem>-peak<k>``), up to this many times. The output is the last attempt's, with
+        every attempt's calls (and the checks') summed and ``peak_gain`` recorded; one that
+        still misses its peak is not converged.
     peak_tolerance : float
-        ln L a check's local search may gain before the run counts as missing its peak.
+        ln L a check may gain before the run counts as missing its peak.
     peak_evaluations : int
-        Likelihood calls of one check's local search (about).
+        Likelihood calls of one check's local search (about); 0: no local search, the
+        reference point alone is checked.
 
     The fields from ``checkpoint_every`` on change only how a run is executed, not its
     result, except that a pool (``n_processes > 1``) changes both samplers' random
@@ -173,7 +176,7 @@ _INTEGER_FIELDS = {
     "queue_size": 1,
     "plateau_restarts": 0,
     "peak_restarts": 0,
-    "peak_evaluations": 1,
+    "peak_evaluations": 0,
 }
 """Integer settings and their minimum."""
 _NUMBER_FIELDS = {
