@@ -17,6 +17,7 @@ from workflow_run import ROOT
 from mgelens.pipeline.model_choice import DEFAULT_THRESHOLD, Candidate, choose
 from mgelens.plot.comparison import OUTLIER
 from mgelens.published import lens_key, read_bolton
+from mgelens.quality import COHERENCE_THRESHOLD, PEAK_THRESHOLD
 from mgelens.summary import FIT_COLUMNS, LIGHT_MODEL_COLUMNS, TABLE_COLUMNS
 
 SAVED = ROOT / "docs" / "slacs"
@@ -111,3 +112,23 @@ def test_the_readme_table_matches_the_saved_table(lenses):
         assert cells[9] == ("**flag**" if fit["lensing_flag"] else "ok"), lens
         assert cells[10] == f"{fit['delta_pa_max']:.0f}°", lens
         assert cells[11] == f"{fit['a4_a_extreme']:+.3f}", lens
+
+
+def test_the_flag_spares_every_fitted_mock_and_flags_the_failures(lenses):
+    """Issue #29 item 3: the residual and lensing flags mark none of the fitted mocks
+    (M1–M3 and the thirteen lenstronomy mocks at SLACS size, docs/slacs/quality_mocks.csv)
+    and mark each of the paper's three failures; every saved flag is its thresholds'."""
+    mocks = saved("quality_mocks.csv")
+    assert {"M1", "M2", "M3"} <= set(mocks["mock"])
+    assert len(mocks) >= 15
+    for table in (mocks, lenses):
+        measured = table[table["quality_flag"].notna()]
+        beyond = (measured["quality_statistic"] > COHERENCE_THRESHOLD) | (
+            measured["quality_peak"] > PEAK_THRESHOLD
+        )
+        assert (measured["quality_flag"].astype(bool) == beyond).all()
+    assert mocks["measured"].all()
+    assert not mocks["quality_flag"].any()
+    assert not mocks["lensing_flag"].any()
+    failures = lenses.loc[["slacs0841+3824", "slacs1432+6317", "slacs2341+0000"]]
+    assert (failures["quality_flag"].fillna(False).astype(bool) | failures["lensing_flag"]).all()
