@@ -173,6 +173,38 @@ def test_a_run_above_its_reference_point_is_kept_as_it_is(monkeypatch):
     assert checked.n_calls == plain.n_calls + 1
 
 
+def test_the_larger_of_the_search_and_the_reference_is_the_gain(monkeypatch):
+    """With both checks, the gain is the larger: a search gaining 0.5 and a reference
+    10 above the run's best (as a spike) restart the run; one that gains 4.5 and a
+    reference in the far tail restart it too, with the search's gain."""
+    monkeypatch.setattr(peak_check, "peak_gain", Gains(0.5, 0.4))
+    settings = dataclasses.replace(FAST, peak_restarts=1)
+    output = run_nested(spiked, SPACE, settings, seed=3, log=lambda _: None, reference=REFERENCE)
+    assert output.settings["n_live"] == 40
+    assert output.peak_gain > 9.0
+    monkeypatch.setattr(peak_check, "peak_gain", Gains(4.5, 0.4))
+    output = run_nested(gaussian, SPACE, settings, seed=3, log=lambda _: None, reference=REFERENCE)
+    assert output.settings["n_live"] == 40
+    assert output.peak_gain == 0.4
+    assert output.converged
+
+
+def test_without_a_search_or_a_reference_nothing_is_checked(monkeypatch):
+    """peak_evaluations 0 and no usable reference (none, or outside the priors): the run
+    as it is, peak_gain None (not a passed check), no extra call."""
+    monkeypatch.setattr(peak_check, "peak_gain", no_search)
+    settings = dataclasses.replace(FAST, peak_restarts=1, peak_evaluations=0)
+    plain = run_nested(spiked, SPACE, FAST, seed=3, log=lambda _: None)
+    outside = np.array([9.0, 0.0])  # beyond Uniform(-5, 5)
+    for reference in (None, outside):
+        lines: list[str] = []
+        output = run_nested(spiked, SPACE, settings, seed=3, log=lines.append, reference=reference)
+        np.testing.assert_array_equal(output.samples, plain.samples)
+        assert output.peak_gain is None
+        assert output.n_calls == plain.n_calls
+        assert any("no peak check" in line for line in lines)
+
+
 def test_pooled_runs_keep_the_largest_peak_gain():
     runs = [
         dataclasses.replace(run_around(PEAK, 50, seed), peak_gain=g)

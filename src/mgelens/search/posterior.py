@@ -97,9 +97,10 @@ class SamplerOutput:
     stop_reason : str
         Why the sampler stopped, in words (recorded in result files).
     peak_gain : float or None
-        ln L that a local search from the highest-likelihood sample gained
-        (:mod:`mgelens.search.peak_check`; ``SamplerSettings.peak_restarts``); None if
-        the run was not checked.
+        How far the run's peak check found ln L above its highest-likelihood sample: by a
+        local search from it (:mod:`mgelens.search.peak_check`) or at the sampler's
+        reference point, the larger (``SamplerSettings.peak_restarts``); None if the run
+        was not checked.
     """
 
     names: tuple[str, ...]

@@ -579,7 +579,8 @@ def run_nested(
     reference : array, optional
         A free-parameter vector whose ln L a converged run must reach within
         ``settings.peak_tolerance`` (e.g. the maximum an optimiser found before sampling);
-        checked, with one likelihood call, only when ``settings.peak_restarts`` > 0.
+        checked after a converged run, with one likelihood call, when
+        ``settings.peak_restarts`` > 0 and the point lies inside the priors' support.
 
     Returns
     -------
@@ -596,6 +597,12 @@ def run_nested(
     output = _sample_with_plateau_restarts(evaluation, settings, checkpoint, seed, log)
     if not (settings.peak_restarts and output.converged):
         return output  # an unconverged run (a cap, a plateau) is reported as such
+    if reference is not None and not np.isfinite(space.log_prior(reference)):
+        log(f"{settings.method}: the reference point lies outside the priors: not checked")
+        reference = None
+    if reference is None and not settings.peak_evaluations:
+        log(f"{settings.method}: no peak check (no local search, no reference point)")
+        return output
     return _with_peak_restarts(evaluation, settings, checkpoint, seed, log, output, reference)
 
 

@@ -68,15 +68,17 @@ discard_exploration
     peak_restarts : int
         0: no check. Otherwise, after a run (any method) that converged, a local search
         from its highest-likelihood sample (:func:`mgelens.search.peak_check.peak_gain`,
-        at most ``peak_evaluations`` calls) checks that the posterior holds the peak of ln L
-        (an unconverged run, capped or on a plateau, is reported as such, unchecked), and
-        so does the ``reference`` point given to :func:`~mgelens.search.sampler.run_nested`
-        (SP's start): the run's peak gain is the larger of the search's gain and the
-        reference's ln L above the run's highest. If it exceeds ``peak_tolerance``, the run
-        is started afresh with twice the live points and the next seed (own checkpoint
-        ``<stem>-peak<k>``), up to this many times. The output is the last attempt's, with
-        every attempt's calls (and the checks') summed and ``peak_gain`` recorded; one that
-        still misses its peak is not converged.
+        at most ``peak_evaluations`` calls; none if that is 0) checks that the posterior
+        holds the peak of ln L (an unconverged run, capped or on a plateau, is reported as
+        such, unchecked), and so does the ``reference`` point given to
+        :func:`~mgelens.search.sampler.run_nested` (SP's start) if it lies inside the
+        priors' support: the run's peak gain is the larger of the search's gain and the
+        reference's ln L above the run's highest (with neither, the run is not checked).
+        If it exceeds ``peak_tolerance``, the run is started afresh with twice the live
+        points and the next seed (own checkpoint ``<stem>-peak<k>``), up to this many
+        times. The output is the last attempt's, with every attempt's calls (and the
+        checks') summed and ``peak_gain`` recorded; one that still misses its peak is not
+        converged.
     peak_tolerance : float
         ln L a check may gain before the run counts as missing its peak.
     peak_evaluations : int
