@@ -660,7 +660,7 @@ def _with_peak_restarts(
     (the checks' calls too) and its ``peak_gain``; not converged if it still misses the
     peak."""
     attempts = []
-    searches = 0 if reference is None else 1
+    check_calls = 0 if reference is None else 1  # the reference's one call
     reference_log_likelihood = None if reference is None else evaluation.counted(reference)
     for attempt in range(settings.peak_restarts + 1):
         if attempt:
@@ -679,7 +679,7 @@ def _with_peak_restarts(
                 log,
             )
         gain, calls = _peak_gain(evaluation, settings, output, reference_log_likelihood, log)
-        searches += calls
+        check_calls += calls
         attempts.append(replace(output, peak_gain=gain))
         if gain <= settings.peak_tolerance or not output.converged:
             break
@@ -699,7 +699,7 @@ def _with_peak_restarts(
         )
     summed = _summed_attempts(attempts, reason)
     return replace(
-        summed, n_calls=summed.n_calls + searches, converged=last.converged and not missed
+        summed, n_calls=summed.n_calls + check_calls, converged=last.converged and not missed
     )
 
 
