@@ -337,7 +337,10 @@ def test_statistics_definitions():
             "a4_a": [0.09, 0.010, -0.024, 0.003, 0.021, -0.005, 0.0, -0.08],
         }
     )
+    assert math.isnan(isophote_statistics(table).a4_a_source_share)  # no column: undefined
+    table["source_share"] = [0.9, 0.1, 0.35, 0.4, 0.2, 0.3, 0.05, 2.0]
     statistics = isophote_statistics(table)
+    assert statistics.a4_a_source_share == pytest.approx(0.35)  # at a = 0.9″, a4/a −0.024
     assert statistics.n_isophotes == 6
     assert statistics.n_isophotes_pa == 5
     assert statistics.delta_q_max == pytest.approx(0.97 - 0.70)
@@ -345,7 +348,10 @@ def test_statistics_definitions():
     assert statistics.a4_a_extreme == pytest.approx(-0.024)
     empty = isophote_statistics(table[table["sma"] > 10.0])
     assert empty.n_isophotes == 0
-    assert all(math.isnan(v) for v in (empty.delta_q_max, empty.delta_pa_max, empty.a4_a_extreme))
+    assert all(
+        math.isnan(v)
+        for v in (empty.delta_q_max, empty.delta_pa_max, empty.a4_a_extreme, empty.a4_a_source_share)
+    )
     assert json.loads(json.dumps(empty.to_dict()))["a4_a_extreme"] is None
 
 
@@ -449,6 +455,10 @@ def test_isophote_figure(tmp_path):
     shape = mass_shape_from([sie], (0.72, 0.78), (48.0, 52.0))
     figure = isophote_figure(image, PIXEL_SCALE, table, shape, title="test", unit="e-/s")
     assert len(figure.axes) == 5  # image, q, PA, a4 and the image's colour bar
+    shared = isophote_figure(image, PIXEL_SCALE, table.assign(source_share=0.1), shape)
+    assert len(shared.axes) == 6  # and the source share under a4, with the a axis label
+    assert shared.axes[4].get_xlabel() == "semi-major axis a [arcsec]"
+    assert shared.axes[3].get_xlabel() == ""
     assert figure.axes[-1].get_ylabel() == "log₁₀ lens light [e-/s per pixel]"
     path = tmp_path / "figure.png"
     save_png(figure, path)

@@ -41,6 +41,7 @@ from mgelens.recovery import true_light_refit
 from mgelens.search.priors import TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult
 from mgelens.source.image_mesh import overlay_centres
+from mgelens.source_share import source_share
 
 PIXEL = 0.1
 MASK_RADIUS = 1.4
@@ -810,6 +811,18 @@ def test_isophotes_of_a_phase_render_its_lens_light(sp_run, mock_dir, tmp_path):
     in_range = np.count_nonzero((sma >= low) & (sma <= high))
     assert summary["statistics"]["n_isophotes"] == in_range
     assert summary["inputs"]["phase"] == str(folder)
+    # the lensed-source share along each isophote, from the fit's own images
+    with fits.open(folder / "model.fits") as hdus:
+        images = [hdus[name].data for name in ("LENS", "LENSED", "MODEL")]
+    shares = source_share(table, *images, PIXEL)
+    np.testing.assert_allclose(table["source_share"].to_numpy(dtype=float), shares)
+    assert np.all(shares[np.isfinite(shares)] >= 0.0)
+    window = (sma >= low) & (sma <= high)
+    a4 = table["a4_a"].to_numpy(dtype=float)[window]
+    share = shares[window][np.argmax(np.abs(a4))] if a4.size else np.nan
+    assert summary["statistics"]["a4_a_source_share"] == (
+        None if np.isnan(share) else pytest.approx(share)
+    )
 
 
 def test_isophotes_of_a_phase_need_the_psf(sp_run, tmp_path, caplog):

@@ -1,5 +1,6 @@
 """Tests of mgelens.summary, mgelens.plot.summary and ``mgelens summary``."""
 
+import dataclasses
 import json
 import math
 
@@ -53,7 +54,10 @@ def summaries(tmp_path):
     for lens, values in LENSES.items():
         mass = MassShape(0.8, 45.0, critical_curve_einstein_radius=1.2) if lens == "J0001" else None
         path = tmp_path / lens / "isophotes.json"
-        write_json(path, lens_summary(lens, statistics(*values), mass, {"image": "x.fits"}))
+        shape = statistics(*values)
+        if lens == "J0001":  # a phase's lens light: the source share is measured
+            shape = dataclasses.replace(shape, a4_a_source_share=0.25)
+        write_json(path, lens_summary(lens, shape, mass, {"image": "x.fits"}))
         paths.append(path)
     return paths
 
@@ -76,8 +80,10 @@ def test_sample_table_has_one_row_per_lens(summaries):
     assert row["a4_a_extreme"] == pytest.approx(-0.037)
     assert row["abs_a4_a_max"] == pytest.approx(0.037)
     assert math.isnan(row["mass_axis_ratio"])
+    assert math.isnan(row["a4_a_source_share"])  # an image's summary: no source share
     with_mass = table.set_index("lens").loc["J0001"]
     assert with_mass["mass_axis_ratio"] == pytest.approx(0.8)
+    assert with_mass["a4_a_source_share"] == pytest.approx(0.25)
     assert with_mass["mass_critical_curve_einstein_radius"] == pytest.approx(1.2)
     expected = {"J0001": True, "J0002": False, "J0003": True, "J0004": False, "J0005": False,
                 "J0006": False}  # fmt: skip
@@ -466,3 +472,12 @@ def test_summary_command_refuses_lenses_without_fits(tmp_path, summaries, caplog
     assert not out.exists()
     arguments[1 : 1 + len(summaries)] = [str(tmp_path / "nope.json")]
     assert main(arguments) == 1
+
+
+def test_a_summary_written_before_the_source_share_reads_as_undefined(summaries):
+    content = json.loads(summaries[0].read_text())
+    del content["statistics"]["a4_a_source_share"]
+    summaries[0].write_text(json.dumps(content))
+    row = sample_table(summaries).set_index("lens").loc[content["lens"]]
+    assert math.isnan(row["a4_a_source_share"])
+    assert row["delta_q_max"] == pytest.approx(LENSES[content["lens"]][0])

@@ -394,6 +394,10 @@ class IsophoteStatistics:
         Isophotes in the range.
     n_isophotes_pa : int
         Of those, the ones used for ΔPA (not round).
+    a4_a_source_share : float
+        The lensed-source share of the light around the isophote of the extreme a₄/a
+        (:mod:`mgelens.source_share`): how much of the fitted light there is the source's.
+        NaN when the table has no ``source_share`` column or it is undefined there.
     sma_min, sma_max : float
         The range, arcsec.
     round_axis_ratio : float
@@ -405,6 +409,7 @@ class IsophoteStatistics:
     a4_a_extreme: float
     n_isophotes: int
     n_isophotes_pa: int
+    a4_a_source_share: float = math.nan
     sma_min: float = STATISTICS_SMA_RANGE[0]
     sma_max: float = STATISTICS_SMA_RANGE[1]
     round_axis_ratio: float = ROUND_AXIS_RATIO
@@ -422,19 +427,27 @@ def isophote_statistics(
     sma_range: tuple[float, float] = STATISTICS_SMA_RANGE,
     round_axis_ratio: float = ROUND_AXIS_RATIO,
 ) -> IsophoteStatistics:
-    """Δq_max, ΔPA_max and the extreme a₄/a of an :func:`isophote_table` (SPEC §9.1)."""
+    """Δq_max, ΔPA_max and the extreme a₄/a of an :func:`isophote_table` (SPEC §9.1), and
+    the source share at the extreme a₄/a if the table has the ``source_share`` column."""
     inside = table[(table["sma"] >= sma_range[0]) & (table["sma"] <= sma_range[1])]
     inside = inside.sort_values("sma")
     q = inside["q"].to_numpy(dtype=float)
     a4 = inside["a4_a"].to_numpy(dtype=float)
     angles = inside.loc[inside["q"] <= round_axis_ratio, "pa"].to_numpy(dtype=float)
     unwrapped = unwrap_position_angles(angles)
+    extreme = int(np.argmax(np.abs(a4))) if a4.size else None
+    share = (
+        float(inside["source_share"].iloc[extreme])
+        if extreme is not None and "source_share" in inside
+        else math.nan
+    )
     return IsophoteStatistics(
         delta_q_max=float(q.max() - q.min()) if q.size else math.nan,
         delta_pa_max=float(unwrapped.max() - unwrapped.min()) if unwrapped.size else math.nan,
-        a4_a_extreme=float(a4[np.argmax(np.abs(a4))]) if a4.size else math.nan,
+        a4_a_extreme=float(a4[extreme]) if a4.size else math.nan,
         n_isophotes=int(q.size),
         n_isophotes_pa=int(unwrapped.size),
+        a4_a_source_share=share,
         sma_min=float(sma_range[0]),
         sma_max=float(sma_range[1]),
         round_axis_ratio=float(round_axis_ratio),

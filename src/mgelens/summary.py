@@ -7,7 +7,8 @@ A per-lens summary is the JSON written by ``mgelens isophotes --summary`` (built
       "lens": "J0252+0039",
       "mgelens_version": "...", "conventions": "...",
       "statistics": {"delta_q_max": ..., "delta_pa_max": ..., "a4_a_extreme": ...,
-                     "n_isophotes": ..., "n_isophotes_pa": ..., "sma_min": 0.5,
+                     "n_isophotes": ..., "n_isophotes_pa": ...,
+                     "a4_a_source_share": ... or null, "sma_min": 0.5,
                      "sma_max": 2.5, "round_axis_ratio": 0.95},
       "mass": null or {"axis_ratio": ..., "angle": ..., "critical_curve_axis_ratio": ...,
                        "critical_curve_angle": ..., "critical_curve_einstein_radius": ...,
@@ -31,6 +32,9 @@ lens                            lens id (folder name)
 delta_q_max                     largest minus smallest isophote q over 0.5″–2.5″
 delta_pa_max                    ΔPA_max, degrees (NaN if all isophotes are round)
 a4_a_extreme                    a₄/a of largest modulus, signed (> 0 disky)
+a4_a_source_share               lensed-source / lens-light model around the isophote of
+                                a4_a_extreme (:mod:`mgelens.source_share`; NaN for a
+                                summary of an image, not of a phase)
 n_isophotes, n_isophotes_pa     isophotes measured; of them, not round (used for ΔPA)
 abs_a4_a_max                    |a4_a_extreme|
 complex                         Δq_max > 0.1 or ΔPA_max > 10°
@@ -105,6 +109,8 @@ DELTA_PA_THRESHOLD = 10.0
 """Degrees."""
 
 STATISTICS_COLUMNS = ("delta_q_max", "delta_pa_max", "a4_a_extreme")
+OPTIONAL_STATISTICS_COLUMNS = ("a4_a_source_share",)
+"""Statistics a summary may lack (NaN then): written only for a phase's lens light."""
 COUNT_COLUMNS = ("n_isophotes", "n_isophotes_pa")
 MASS_COLUMNS = (
     "axis_ratio",
@@ -117,6 +123,7 @@ _DERIVED_COLUMNS = ("abs_a4_a_max", "complex")
 TABLE_COLUMNS = (
     "lens",
     *STATISTICS_COLUMNS,
+    *OPTIONAL_STATISTICS_COLUMNS,
     *COUNT_COLUMNS,
     *_DERIVED_COLUMNS,
     *(f"mass_{name}" for name in MASS_COLUMNS),
@@ -190,6 +197,7 @@ def _summary_row(path: Path) -> dict:
         row = {"lens": str(content["lens"])}
         row.update({name: _number(statistics[name]) for name in STATISTICS_COLUMNS})
         row.update({name: int(statistics[name]) for name in COUNT_COLUMNS})
+        row.update({name: _number(statistics.get(name)) for name in OPTIONAL_STATISTICS_COLUMNS})
     except FileNotFoundError as exc:
         raise ValueError(f"{path}: lens summary not found") from exc
     except (json.JSONDecodeError, KeyError, TypeError) as exc:

@@ -16,7 +16,9 @@ With ``--phase`` instead of an image, the lens light is the maximum-likelihood l
 grid the PSF is sampled on) with the fits' over-sampling and convolved with ``--psf``
 (required); the centre is the first component's centre, and the
 phase's mass model (q, φ with 3σ intervals, critical curve, Einstein radius, SPEC §9.3)
-joins the summary and figure::
+joins the summary and figure, and the table gains ``source_share``, the lensed-source
+model's share of the fitted light around each isophote (:mod:`mgelens.source_share`,
+from the phase's ``model.fits``); its value at the extreme a₄/a joins the statistics::
 
     mgelens isophotes --phase results/M1/mass --psf results/M1/mock/psf.fits \
         --save-image results/M1/lens_light.fits --out results/M1/isophotes.csv
@@ -24,6 +26,7 @@ joins the summary and figure::
 
 import argparse
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +54,7 @@ from mgelens.pipeline.records import MODEL_FILE, PhaseInputError, lens_light_pro
 from mgelens.plot import save_png
 from mgelens.plot.isophotes import isophote_figure
 from mgelens.search.results import PhaseResult
+from mgelens.source_share import source_share
 from mgelens.summary import lens_summary
 from mgelens.threads import limit_threads
 
@@ -104,6 +108,11 @@ def format_statistics(lens: str, statistics: IsophoteStatistics) -> str:
             f"delta_pa_max_deg: {statistics.delta_pa_max:.2f}",
             f"a4_a_extreme: {a4:+.4f} ({kind})",
         ]
+        + (
+            []
+            if math.isnan(statistics.a4_a_source_share)
+            else [f"a4_a_source_share: {statistics.a4_a_source_share:.3f}"]
+        )
     )
 
 
@@ -122,8 +131,10 @@ def run(args: argparse.Namespace) -> int:
         return 1
     if centre is None:
         centre = brightest_pixel_centre(image, args.pixel_scale)
-    lens = args.lens or (args.phase.parent.name if args.phase else args.image.stem)
+    lens = args.lens or (args.phase.resolve().parent.name if args.phase else args.image.stem)
     table = isophote_table(image, args.pixel_scale, centre=tuple(centre))
+    if args.phase is not None:
+        table["source_share"] = _phase_source_share(args.phase, table, args.pixel_scale)
     statistics = isophote_statistics(table)
     with atomic_path(args.out) as temporary:
         table.to_csv(temporary, index=False)
@@ -198,3 +209,18 @@ def _phase_light(args: argparse.Namespace):
         angle_interval=interval.get("mass.angle"),
     )
     return image, centre, mass, unit
+
+
+def _phase_source_share(phase: Path, table, pixel_scale: float) -> np.ndarray:
+    """:func:`mgelens.source_share.source_share` of ``table`` from the phase's
+    ``model.fits`` (LENS, LENSED, MODEL; array centre at XCENTRE, YCENTRE)."""
+    with fits.open(phase / MODEL_FILE) as hdus:
+        try:
+            lens, lensed, model = (hdus[name].data for name in ("LENS", "LENSED", "MODEL"))
+        except KeyError as exc:
+            raise PhaseInputError(
+                f"{phase / MODEL_FILE}: no {exc} extension; rerun the phase to rewrite it"
+            ) from None
+        header = hdus["LENS"].header
+        origin = (float(header.get("XCENTRE", 0.0)), float(header.get("YCENTRE", 0.0)))
+        return source_share(table, lens, lensed, model, pixel_scale, origin)

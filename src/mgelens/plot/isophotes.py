@@ -158,7 +158,12 @@ def _plot_a4(ax: Axes, table: pd.DataFrame) -> None:
         color=LIGHT_COLOUR,
     )
     ax.set_ylabel("a₄/a (> 0 disky)")
-    ax.set_xlabel("semi-major axis a [arcsec]")
+
+
+def _plot_source_share(ax: Axes, table: pd.DataFrame) -> None:
+    ax.plot(table["sma"], table["source_share"], "o", markersize=3, color=LIGHT_COLOUR)
+    ax.set_ylim(bottom=0.0)
+    ax.set_ylabel("lensed source /\nlens light")
 
 
 def isophote_figure(
@@ -206,12 +211,15 @@ def isophote_figure(
         centre = (
             (float(table["x0"].iloc[0]), float(table["y0"].iloc[0])) if len(table) else (0.0, 0.0)
         )
-    figure = Figure(figsize=(11.0, 5.5), layout="constrained")
-    grid = figure.add_gridspec(3, 2, width_ratios=(1.15, 1.0))
+    with_share = "source_share" in table
+    figure = Figure(figsize=(11.0, 7.0 if with_share else 5.5), layout="constrained")
+    grid = figure.add_gridspec(4 if with_share else 3, 2, width_ratios=(1.15, 1.0))
     image_ax = figure.add_subplot(grid[:, 0])
     q_ax = figure.add_subplot(grid[0, 1])
-    pa_ax = figure.add_subplot(grid[1, 1], sharex=q_ax)
-    a4_ax = figure.add_subplot(grid[2, 1], sharex=q_ax)
+    profile_axes = [q_ax] + [figure.add_subplot(grid[k, 1], sharex=q_ax) for k in (1, 2)]
+    if with_share:
+        profile_axes.append(figure.add_subplot(grid[3, 1], sharex=q_ax))
+    pa_ax, a4_ax = profile_axes[1:3]
     artist = _show_image(
         image_ax, image, pixel_scale, table, mass, centre, half_width, n_isophotes, origin
     )
@@ -224,12 +232,15 @@ def isophote_figure(
     _plot_axis_ratio(q_ax, table, mass)
     _plot_angle(pa_ax, table, mass)
     _plot_a4(a4_ax, table)
+    if with_share:
+        _plot_source_share(profile_axes[3], table)
     upper = float(table["sma"].max()) * 1.05 if len(table) else 3.0
-    for ax in (q_ax, pa_ax, a4_ax):
+    for ax in profile_axes:
         _mark_radii(ax, mass)
         ax.set_xlim(0.0, upper)
-    for ax in (q_ax, pa_ax):
+    for ax in profile_axes[:-1]:
         ax.tick_params(labelbottom=False)
+    profile_axes[-1].set_xlabel("semi-major axis a [arcsec]")
     q_ax.legend(fontsize="small")
     if title is not None:
         figure.suptitle(title)
