@@ -348,10 +348,8 @@ def test_statistics_definitions():
     assert statistics.a4_a_extreme == pytest.approx(-0.024)
     empty = isophote_statistics(table[table["sma"] > 10.0])
     assert empty.n_isophotes == 0
-    assert all(
-        math.isnan(v)
-        for v in (empty.delta_q_max, empty.delta_pa_max, empty.a4_a_extreme, empty.a4_a_source_share)
-    )
+    undefined = (empty.delta_q_max, empty.delta_pa_max, empty.a4_a_extreme)
+    assert all(math.isnan(v) for v in (*undefined, empty.a4_a_source_share))
     assert json.loads(json.dumps(empty.to_dict()))["a4_a_extreme"] is None
 
 

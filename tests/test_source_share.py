@@ -34,8 +34,9 @@ def lens_light():
 def test_a_uniform_sheet_gives_its_ratio_to_the_light_on_the_isophote(lens_light):
     """With LENSED a constant k, the share around an isophote of semi-major axis a is
     k / I(a) = k e^{a/s} (to O(Δ²) of the annulus's curvature: under 1 %). An annulus
-    turned by 90° (a wrong PA convention) sums the light elsewhere and misses by 8 % or more on half the isophotes."""
-    x, y, lens, table = lens_light
+    turned by 90° (a wrong PA convention) sums the light elsewhere and misses by 8 % or
+    more on half the isophotes."""
+    _, _, lens, table = lens_light
     assert len(table) > 20
     sheet = np.full(SHAPE, 0.02)
     shares = source_share(table, lens, sheet, lens + sheet, PIXEL)
@@ -56,7 +57,8 @@ def test_a_copy_of_the_lens_light_gives_its_scale_and_masked_annuli_are_undefine
     # inside: the whole annulus within 1.5″ of the origin; outside: not even its minor axis
     inside = sma + PIXEL + np.hypot(*CENTRE) < 1.5
     outside = AXIS_RATIO * sma - PIXEL - np.hypot(*CENTRE) > 1.5
-    assert inside.sum() > 10 and outside.sum() > 3
+    assert inside.sum() > 10
+    assert outside.sum() > 3
     np.testing.assert_allclose(shares[inside], 0.3, rtol=1e-12)
     assert np.all(np.isnan(shares[outside]))
     defined = np.isfinite(shares)
