@@ -20,8 +20,8 @@ LAYERS = (
     ("pipeline", ("pipeline",)),
     ("analysis", ("simulate", "mock_light", "mock_sources", "mock_lenses",
                   "independent_mock", "ellipse_fit", "isophotes", "source_share",
-                  "isophote_recovery", "recovery", "coverage", "quality", "overview", "summary", "published", "mock_study",
-                  "smoothness")),
+                  "isophote_recovery", "recovery", "coverage", "quality", "overview", "summary",
+                  "published", "mock_study", "smoothness")),
     ("plot", ("plot",)),
     ("commands", ("commands", "cli", "__main__")),
 )  # fmt: skip
