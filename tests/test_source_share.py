@@ -4,6 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from mgelens.geometry import to_profile_frame
 from mgelens.grid import pixel_centres
 from mgelens.isophotes import isophote_table
 from mgelens.source_share import source_share
@@ -16,10 +17,7 @@ SCALE = 0.7  # arcsec, of the exponential lens light
 
 
 def elliptical_radius(x, y, centre=CENTRE, axis_ratio=AXIS_RATIO, angle=ANGLE):
-    t = np.deg2rad(angle)
-    dx, dy = x - centre[0], y - centre[1]
-    u = dx * np.cos(t) + dy * np.sin(t)
-    v = -dx * np.sin(t) + dy * np.cos(t)
+    u, v = to_profile_frame(x, y, centre, angle)
     return np.hypot(u, v / axis_ratio)
 
 

@@ -24,6 +24,7 @@ array centre's position); angles are degrees CCW from +x.
 import numpy as np
 import pandas as pd
 
+from mgelens.geometry import to_profile_frame
 from mgelens.grid import pixel_centres
 
 MIN_FITTED_FRACTION = 0.5
@@ -69,10 +70,7 @@ def source_share(
     fitted = np.isfinite(model) & (model != 0.0)
     shares = np.full(len(table), np.nan)
     for k, row in enumerate(table.itertuples(index=False)):
-        angle = np.deg2rad(row.pa)
-        dx, dy = x - row.x0, y - row.y0
-        u = dx * np.cos(angle) + dy * np.sin(angle)
-        v = -dx * np.sin(angle) + dy * np.cos(angle)
+        u, v = to_profile_frame(x, y, (row.x0, row.y0), row.pa)
         annulus = np.abs(np.hypot(u, v / row.q) - row.sma) <= pixel_scale
         inside = annulus & fitted
         if inside.sum() < MIN_FITTED_FRACTION * annulus.sum() or not inside.any():
