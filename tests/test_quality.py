@@ -297,7 +297,14 @@ def test_quality_command_writes_the_record(phase, capsys):
     lensing = record["lensing"]
     assert lensing["critical_curve_einstein_radius"] == pytest.approx(1.2, abs=0.01)
     assert lensing["flag"] is False
-    assert "FLAG" in capsys.readouterr().out
+    # the ring at θ_E traces inside the SIS's cut: every pixel of it has a counter-image
+    multiplicity = record["multiplicity"]
+    assert multiplicity["multiply_imaged_fraction"] == pytest.approx(1.0)
+    assert multiplicity["n_pixels"] > 100
+    assert multiplicity["flag"] is False
+    out = capsys.readouterr().out
+    assert "FLAG" in out
+    assert "100% of the lensed source's signal" in out
 
 
 def test_quality_command_takes_the_sky_noise_scale_for_a_small_circle(phase, capsys):

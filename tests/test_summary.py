@@ -165,8 +165,10 @@ def write_lens_folder(root, lens, theta, q, slope, names, measured, flag):
                "lensing": {"critical_curve_einstein_radius": 1.0 if measured else None,
                            "flag": not measured, "reason": "",
                            "centre_offset": 0.02 if measured else None}}  # fmt: skip
-    if flag:  # a record of the sky's τ; the others predate the key
+    if flag:  # a record of the sky's τ and of the image multiplicity; the others predate them
         quality["noise_scale_from"] = "sky"
+        quality["multiplicity"] = {"multiply_imaged_fraction": 0.3, "n_pixels": 40,
+                                   "flag": True, "reason": "singly imaged"}  # fmt: skip
     write_json(folder / "quality.json", quality)
     y, x = (np.indices(SHAPE) - 20) * PIXEL
     mask = np.hypot(x, y) > RADIUS
@@ -248,6 +250,10 @@ def test_lens_table_converts_and_compares(lens_folders, reference):
     sources = [t["quality_noise_scale_from"] for t in (sie, epl, mock)]
     assert [s if isinstance(s, str) else "" for s in sources] == ["residuals", "sky", ""]
     assert sie["mass_light_offset"] == 0.02
+    assert epl["multiply_imaged_fraction"] == 0.3
+    assert epl["singly_imaged_flag"] == True  # noqa: E712
+    assert math.isnan(sie["multiply_imaged_fraction"])
+    assert pd.isna(sie["singly_imaged_flag"])
     assert math.isnan(mock["mass_light_offset"])
     assert mock[["bolton_b_sie", "shajib_theta_e", "quality_statistic"]].isna().all()
 

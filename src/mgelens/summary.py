@@ -73,6 +73,12 @@ lensing_flag                    the MASS model has no closed, galaxy-like tangen
                                 more than 0.1″ from the lens light's
 mass_light_offset               distance of the MASS model's mass centre from the lens-light
                                 centre (arcsec)
+multiply_imaged_fraction        share of the lensed source's signal, Σ (LENSED/σ)², that is
+                                multiply imaged under the MASS model
+                                (:func:`mgelens.image_multiplicity.multiplicity_check`; NaN
+                                in quality records written before it)
+singly_imaged_flag              that share is below one half: θ_E rests mostly on the shape
+                                of single arcs (empty where not measured)
 ==============================  ==============================================================
 
 Published columns are NaN for lenses absent from a table, and all NaN (with a logged
@@ -151,6 +157,8 @@ FIT_COLUMNS = (
     "quality_noise_scale_from",
     "lensing_flag",
     "mass_light_offset",
+    "multiply_imaged_fraction",
+    "singly_imaged_flag",
 )  # fmt: skip
 """Columns :func:`lens_table` adds to :data:`TABLE_COLUMNS`."""
 QUALITY_FILE = "quality.json"
@@ -374,6 +382,7 @@ def _fit_row(lens_folder: Path) -> dict:
         row["quality_noise_scale_from"] = quality.get("noise_scale_from", measured_from)
         row["lensing_flag"] = bool(quality["lensing"]["flag"])
         row["mass_light_offset"] = _number(quality["lensing"]["centre_offset"])
+        row.update(_multiplicity_columns(quality))
     except FileNotFoundError as exc:
         raise ValueError(f"{lens_folder}: {exc.filename} not found") from exc
     except PhaseInputError as exc:
@@ -383,6 +392,18 @@ def _fit_row(lens_folder: Path) -> dict:
             f"{lens_folder}: incomplete MASS result or quality record ({exc!r})"
         ) from exc
     return row
+
+
+def _multiplicity_columns(quality: dict) -> dict:
+    """``multiply_imaged_fraction`` and ``singly_imaged_flag`` of a quality record (NaN
+    and NA for records written before the check, or without lensed pixels above the
+    noise)."""
+    check = quality.get("multiplicity") or {}
+    fraction = check.get("multiply_imaged_fraction")
+    return {
+        "multiply_imaged_fraction": _number(fraction),
+        "singly_imaged_flag": pd.NA if fraction is None else bool(check["flag"]),
+    }
 
 
 def lens_table(
@@ -417,4 +438,5 @@ def lens_table(
     fits["shajib_gamma_err_hi"] = published["shajib_gamma_hi"]
     fits["theta_e_over_shajib"] = fits["theta_e_lt"] / published["shajib_theta_e"]
     fits["quality_flag"] = fits["quality_flag"].astype("boolean")
+    fits["singly_imaged_flag"] = fits["singly_imaged_flag"].astype("boolean")
     return pd.concat([table, fits[list(FIT_COLUMNS)]], axis=1)

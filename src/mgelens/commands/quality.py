@@ -18,9 +18,12 @@ any), the lens's data (for the sky's τ beyond the fit circle, step 6 of
      "sky_noise_scale": ..., "n_sky_pairs": ..., "coherence_threshold": ...,
      "peak_threshold": ..., "inputs": {...}}
 
-(worst_x, worst_y in arcsec: the used-pixel centroid of the block of largest |z_b|), and
+(worst_x, worst_y in arcsec: the used-pixel centroid of the block of largest |z_b|),
 under ``lensing`` the check of :func:`mgelens.quality.lensing_check` of the phase's
-maximum-likelihood mass against the fit circle and its first lens-light component's centre.
+maximum-likelihood mass against the fit circle and its first lens-light component's centre,
+and under ``multiplicity`` how much of the lensed source's signal that mass images more
+than once (:func:`mgelens.image_multiplicity.multiplicity_check`: ``multiply_imaged_fraction``,
+``n_pixels``, ``flag`` below one half, ``reason``).
 Exit code 1 with a one-line error for missing or inconsistent inputs.
 """
 
@@ -34,9 +37,11 @@ from astropy.io import fits
 
 from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.atomic import write_json
+from mgelens.grid import pixel_centres
+from mgelens.image_multiplicity import multiplicity_check
 from mgelens.imaging import MASK_FILE, Imaging
 from mgelens.imaging_input import ImagingError, read_fits_mask
-from mgelens.mask import circular, contaminants
+from mgelens.mask import SLACS_NOISE_THRESHOLD, circular, contaminants
 from mgelens.pipeline.records import (
     MODEL_FILE,
     fit_record_of,
@@ -124,11 +129,21 @@ def run(args: argparse.Namespace) -> int:
         )
         fitted = fit_record_of(result, args.phase / RESULT_FILE)
         light = light_components(fitted)[0]
+        mass = masses_from_record(fitted)
+        mask_radius = float(settings["mask_radius"])
         lensing = lensing_check(
-            masses_from_record(fitted),
-            float(settings["mask_radius"]),
+            mass, mask_radius, spec.mask_centre, light_centre=tuple(light["centre"])
+        )
+        x, y = pixel_centres(imaging.shape, imaging.pixel_scale)
+        multiplicity = multiplicity_check(
+            mass,
+            lensed,
+            imaging.noise_map,
+            ~imaging.mask & (imaging.noise_map <= SLACS_NOISE_THRESHOLD),
+            x,
+            y,
+            mask_radius,
             spec.mask_centre,
-            light_centre=tuple(light["centre"]),
         )
     except (OSError, KeyError, ValueError, ImagingError) as exc:
         logger.error("quality of %s: %s", lens, exc)
@@ -140,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
         "conventions": CONVENTIONS_VERSION,
         **statistic.to_dict(),
         "lensing": lensing.to_dict(),
+        "multiplicity": multiplicity.to_dict(),
         "inputs": {"model": str(args.phase / MODEL_FILE), "lens_dir": str(lens_dir)},
     }
     write_json(args.out, record)
@@ -153,6 +169,13 @@ def run(args: argparse.Namespace) -> int:
     )
     if lensing.flag:
         print(f"{lens}: LENSING FLAG: {lensing.reason}")
+    if multiplicity.multiply_imaged_fraction is not None:
+        print(
+            f"{lens}: {multiplicity.multiply_imaged_fraction:.0%} of the lensed source's signal "
+            f"({multiplicity.n_pixels} pixels above the noise) is multiply imaged"
+        )
+    if multiplicity.flag:
+        print(f"{lens}: SINGLY IMAGED FLAG: {multiplicity.reason}")
     return 0
 
 

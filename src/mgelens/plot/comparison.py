@@ -5,8 +5,9 @@ Two panels of a :func:`mgelens.summary.lens_table`: our θ_E^LT (MASS posterior 
 1σ errors, converted from θ_E^AG) against Bolton et al. 2008's b_SIE, and against Shajib et
 al. 2021's imaging-only power-law θ_E (with their 1σ errors). Each panel has the 1:1 line,
 a ±5 % band, the names of lenses off by more than 10 %, fits flagged by the residuals
-(``quality_flag``) circled in red and by the lensing check (``lensing_flag``) boxed in
-orange, and the least-squares slope of
+(``quality_flag``) circled in red, by the lensing check (``lensing_flag``) boxed in
+orange and singly imaged ones (``singly_imaged_flag``) in purple diamonds, and the
+least-squares slope of
 y = a·x (:func:`mgelens.published.slope_through_origin`). A panel without published values
 says so. :func:`slope_figure` sets our γ against Shajib's in the same way, naming the
 lenses whose slopes differ by more than :data:`mgelens.published.SLOPE_TENSION` combined
@@ -27,6 +28,7 @@ OUTLIER = 0.10
 FLAG_MARKERS = (
     ("quality_flag", "o", "tab:red", "residuals flagged"),
     ("lensing_flag", "s", "tab:orange", "lensing flagged"),
+    ("singly_imaged_flag", "D", "tab:purple", "singly imaged"),
 )
 """(table column, marker, colour, legend label) of the flagged fits' outlines."""
 PANELS = (
