@@ -189,6 +189,61 @@ def test_lens_light_alone_has_no_arcs_and_keeps_the_anchor_priors(tmp_path):
     assert sp_start.started_space(problem.space, start) is problem.space
 
 
+def _light_only_fit_values(problem) -> dict:
+    """The search's step 1 alone: the lens-light maximum under a mass that lenses nothing."""
+    likelihood = run.PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    posterior = sp_start._Posterior(likelihood, problem.space)
+    names = problem.space.free_names
+    x = problem.space.prior_transform(np.full(problem.space.n_free, 0.5))
+    x[names.index("mass.einstein_radius")] = sp_start.NO_LENSING_EINSTEIN_RADIUS
+    light = [i for i, n in enumerate(names) if n.startswith(models.LENS_LIGHT + ".")]
+    bounds = [sp_start._light_bounds(problem.space, i) for i in light]
+    x, _ = sp_start._maximise(posterior, x, light, bounds, sp_start.LIGHT_CALLS)
+    return problem.space.values(x)
+
+
+def test_a_faint_sources_arcs_are_found_in_boxes(tmp_path):
+    """M1 with its noise raised 30 times: fewer than ten single pixels of the light-only
+    fit exceed 3σ, but the 3×3 boxes along the arcs do, and the arcs they give trace back
+    through an isothermal mass within 10 % of M1's θ_E."""
+    folder = _mock_folder(tmp_path, noise_factor=30.0)
+    problem = sp_phase.problem(folder, folder, settings_from_mapping({}), LENS)
+    values = _light_only_fit_values(problem)
+    result = sp_start.fit(problem.dataset, problem.model.build(values))
+    px, py = problem.dataset.pixel_centres
+    distance = np.hypot(px, py)
+    annulus = (distance > sp_start.ARC_INNER_RADIUS) & (
+        distance < sp_start.ARC_OUTER_FRACTION * MASK_RADIUS
+    )
+    single = np.count_nonzero(annulus & (result.normalized_residuals > sp_start.ARC_SIGNIFICANCE))
+    assert single < sp_start.MIN_ARC_PIXELS
+    x, y, weight, centre = sp_start.arc_pixels(problem.dataset, values, problem.model, MASK_RADIUS)
+    assert len(x) >= 5 * sp_start.MIN_ARC_PIXELS
+    assert (weight > 0).all()
+    arcs = sp_start.arc_mass(x, y, weight, centre, MASK_RADIUS)
+    truth = mock_lenses.paper_mock("M1").mass[0]
+    assert abs(arcs.einstein_radius / truth.einstein_radius - 1) < 0.1
+
+
+def test_box_residuals_of_white_noise_are_unit_normal():
+    """Σ r / √n over each box of white unit noise is N(0, 1) (also at the mask's edge,
+    where a box holds fewer pixels); the mean residual is the box's mean."""
+    rng = np.random.default_rng(5)
+    x, y = pixel_centres((80, 80), 1.0)
+    mask = np.hypot(x, y) > 35.0
+    normalized = rng.standard_normal(np.count_nonzero(~mask))
+    significance, mean = sp_start.box_residuals(normalized, 2.0 * normalized, mask, 3)
+    assert np.std(significance) == pytest.approx(1.0, abs=0.03)
+    assert abs(np.mean(significance)) < 0.15  # boxes overlap: σ of the mean ≈ 0.05
+    native = np.zeros(mask.shape)
+    native[~mask] = normalized
+    row, column = 40, 40  # an interior pixel: its box is the 3×3 around it
+    inside = np.flatnonzero(~mask.ravel()).tolist().index(row * 80 + column)
+    box = native[row - 1 : row + 2, column - 1 : column + 2]
+    assert significance[inside] == pytest.approx(box.sum() / 3.0)
+    assert mean[inside] == pytest.approx(2.0 * box.mean())
+
+
 def test_start_json_is_reused_for_the_same_fingerprint_only(tmp_path, mock_start):
     runs = []
 
