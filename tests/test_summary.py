@@ -456,6 +456,8 @@ def test_summary_command(tmp_path, lens_folders, reference, capsys):
     assert "lenses: 3 (3 with isophotes)" in printed
     assert "complex_fraction: 0.000" in printed
     assert "quality_flagged: 1 of 2 measured" in printed
+    assert "singly_imaged_flagged: 1 of 1 measured" in printed
+    assert "lensing_flagged: 1 of 3" in printed
     assert "light_models_chosen: {'X2+point': 1} (1 by evidence)" in printed
     assert "theta_e_lt_vs_bolton: a = " in printed
     assert "theta_e_lt_vs_shajib: a = 0.958 (1 lens)" in printed

@@ -130,8 +130,10 @@ def run(args: argparse.Namespace) -> int:
     )
     chosen = chosen_by_evidence["light_model"]
     print(f"light_models_chosen: {chosen.value_counts().to_dict()} ({len(chosen)} by evidence)")
-    flags = table["quality_flag"]
-    print(f"quality_flagged: {int(flags.sum())} of {int(flags.notna().sum())} measured")
+    for name in ("quality", "singly_imaged"):
+        flags = table[f"{name}_flag"]
+        print(f"{name}_flagged: {int(flags.sum())} of {int(flags.notna().sum())} measured")
+    print(f"lensing_flagged: {int(table['lensing_flag'].sum())} of {len(table)}")
     for name, column in (("bolton", "bolton_b_sie"), ("shajib", "shajib_theta_e")):
         fit = slope_through_origin(table[column], table["theta_e_lt"])
         print(f"theta_e_lt_vs_{name}: {slope_text(*fit)}")
