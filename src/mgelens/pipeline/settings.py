@@ -386,8 +386,8 @@ convergence: SPix1 and SPix2 then start afresh with twice the live points, up to
 (24, 48, 96 and 12, 24, 48); the real samples' configs (config/slacs.yaml,
 config/paper.yaml) start SPix2 at 24. MASS, whose posterior is the result: nautilus with
 30 live points per source mesh (two meshes), stopped when the live set holds 5 % of the
-evidence and 300 effective samples are drawn; a run whose highest-likelihood sample a
-local search raises by more than 2 in ln L missed the peak of a narrow slope–θ_E ridge
+evidence and 300 effective samples are drawn; a run whose highest-posterior sample a
+local search raises by more than 2 in ln L + ln prior missed the peak of a narrow slope–θ_E ridge
 and is sampled again with 60, then 120 live points (``peak_restarts``). The measurements
 behind each choice, and nautilus tried for SP, are in docs/slam.md, "Quick-profile
 samplers"."""

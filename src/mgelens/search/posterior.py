@@ -97,10 +97,11 @@ class SamplerOutput:
     stop_reason : str
         Why the sampler stopped, in words (recorded in result files).
     peak_gain : float or None
-        How far the run's peak check found ln L above its highest-likelihood sample: by a
-        local search from it (:mod:`mgelens.search.peak_check`) or at the sampler's
-        reference point, the larger (``SamplerSettings.peak_restarts``); None if the run
-        was not checked.
+        How far the run's peak check found it short of its peak: the gain in ln L + ln
+        prior of a local search from its highest-posterior sample
+        (:mod:`mgelens.search.peak_check`) or the sampler's reference point's ln L above
+        its highest, the larger (``SamplerSettings.peak_restarts``); None if the run was
+        not checked.
     """
 
     names: tuple[str, ...]

@@ -653,7 +653,7 @@ def _with_peak_restarts(
     output: SamplerOutput,
     reference: np.ndarray | None,
 ) -> SamplerOutput:
-    """Check that ``output`` (converged) holds the likelihood's peak
+    """Check that ``output`` (converged) holds its peak
     (:func:`_peak_gain`); while it does not, sample afresh with twice the live points, up
     to ``settings.peak_restarts`` times (a restart that does not converge ends the loop).
     The last attempt's output, with every attempt's calls, runtimes and resumes summed
@@ -668,7 +668,7 @@ def _with_peak_restarts(
             log(
                 f"{settings.method}: restart {attempt} of {settings.peak_restarts} with "
                 f"{restart.n_live} live points and seed {seed + attempt}: the posterior "
-                "misses the likelihood's peak"
+                "misses its peak"
             )
             evaluation.counts[:] = [0, 0]
             output = _sample_with_plateau_restarts(
@@ -689,13 +689,12 @@ def _with_peak_restarts(
     if len(attempts) > 1:
         reason += (
             f" (attempt {len(attempts)}, live points {_live_points(attempts)}: the earlier "
-            "attempts missed the likelihood's peak)"
+            "attempts missed their peak)"
         )
     if missed:
         reason += (
-            f"; its peak check found ln L {last.peak_gain:.2f} above its highest-likelihood "
-            f"sample (more than {settings.peak_tolerance}): the posterior misses the "
-            "likelihood's peak"
+            f"; its peak check gained {last.peak_gain:.2f} over its best sample (more than "
+            f"{settings.peak_tolerance}): the posterior misses its peak"
         )
     summed = _summed_attempts(attempts, reason)
     return replace(
@@ -710,9 +709,12 @@ def _peak_gain(
     reference_log_likelihood: float | None,
     log: Callable[[str], None],
 ) -> tuple[float, int]:
-    """How far ln L rises above ``output``'s highest-likelihood sample: by a local search
-    from it (:func:`peak_check.peak_gain`, unless ``settings.peak_evaluations`` is 0) and
-    at the reference point; the larger gain (≥ 0) and the search's calls."""
+    """How far the run falls short of its peak: the gain in ln L + ln prior of a local
+    search from its highest-posterior sample (:func:`peak_check.peak_gain`, unless
+    ``settings.peak_evaluations`` is 0) and the reference point's ln L above the
+    highest-likelihood sample's (the reference is the centre of the priors it passed, so
+    no prior pulls the posterior away from it); the larger gain (≥ 0) and the search's
+    calls."""
     best = float(output.log_likelihoods.max())
     gain, calls = 0.0, 0
     if settings.peak_evaluations:
@@ -720,8 +722,9 @@ def _peak_gain(
             evaluation.counted, evaluation.space, output, settings.peak_evaluations
         )
         log(
-            f"{settings.method}: a local search from the highest-likelihood sample (ln L "
-            f"{best:.2f}) gains {gain:.2f} in {calls} calls (tolerance {settings.peak_tolerance})"
+            f"{settings.method}: a local search from the highest-posterior sample gains "
+            f"{gain:.2f} in ln L + ln prior in {calls} calls (tolerance "
+            f"{settings.peak_tolerance}; highest ln L {best:.2f})"
         )
     if reference_log_likelihood is not None:
         shortfall = reference_log_likelihood - best

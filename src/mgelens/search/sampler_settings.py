@@ -67,10 +67,10 @@ discard_exploration
         attempts summed and the restarts named in its stop reason.
     peak_restarts : int
         0: no check. Otherwise, after a run (any method) that converged, a local search
-        from its highest-likelihood sample (:func:`mgelens.search.peak_check.peak_gain`,
+        from its highest-posterior sample (:func:`mgelens.search.peak_check.peak_gain`,
         at most ``peak_evaluations`` calls; none if that is 0) checks that the posterior
-        holds the peak of ln L (an unconverged run, capped or on a plateau, is reported as
-        such, unchecked), and so does the ``reference`` point given to
+        holds the peak of ln L + ln prior (an unconverged run, capped or on a plateau, is
+        reported as such, unchecked), and so does the ``reference`` point given to
         :func:`~mgelens.search.sampler.run_nested` (SP's start) if it lies inside the
         priors' support: the run's peak gain is the larger of the search's gain and the
         reference's ln L above the run's highest (with neither, the run is not checked).
