@@ -6,6 +6,7 @@ import dataclasses
 import json
 import logging
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ import yaml
 
 from mgelens import mock_lenses, simulate
 from mgelens.fit import FitDataset
+from mgelens.geometry import axis_ratio_and_angle_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.mass import SIE, ExternalShear, ray_trace
@@ -242,6 +244,44 @@ def test_box_residuals_of_white_noise_are_unit_normal():
     box = native[row - 1 : row + 2, column - 1 : column + 2]
     assert significance[inside] == pytest.approx(box.sum() / 3.0)
     assert mean[inside] == pytest.approx(2.0 * box.mean())
+
+
+def test_the_light_stage_starts_at_the_datas_second_moments():
+    """An elliptical Gaussian galaxy (q 0.6 at φ 30°, σ 0.4″ along its major axis, centred
+    0.05″ off the prior's mean): the moments within 1″ give its angle to a degree and an
+    axis ratio a little rounder than its own (the circle cuts the major axis's wings);
+    each lens-light ell_comps pair of the start takes them, nothing else changes."""
+    x, y = pixel_centres((81, 81), 0.05)
+    xp, yp = x - 0.05, y + 0.02
+    phi = np.deg2rad(30.0)
+    major = xp * np.cos(phi) + yp * np.sin(phi)
+    minor = -xp * np.sin(phi) + yp * np.cos(phi)
+    image = np.exp(-0.5 * ((major / 0.4) ** 2 + (minor / 0.24) ** 2))
+    mask = np.hypot(x, y) > 3.0
+    dataset = SimpleNamespace(
+        pixel_centres=(x[~mask], y[~mask]), imaging=SimpleNamespace(data=image), mask=mask
+    )
+    priors = {
+        "lens_light.set_0.centre_x": TruncatedGaussian(0.0, 0.1, -np.inf, np.inf),
+        "lens_light.set_0.centre_y": TruncatedGaussian(0.0, 0.1, -np.inf, np.inf),
+        "lens_light.set_0.ell_comps_1": Uniform(-1.0, 1.0),
+        "lens_light.set_0.ell_comps_2": Uniform(-1.0, 1.0),
+        "lens_light.set_1.ell_comps_1": Uniform(-1.0, 1.0),
+        "lens_light.set_1.ell_comps_2": Uniform(-1.0, 1.0),
+        "mass.einstein_radius": Uniform(0.0, 8.0),
+    }
+    space = ParameterSpace.from_priors(priors)
+    ell_comps = sp_start.light_moments(dataset, space)
+    q, angle = axis_ratio_and_angle_from(ell_comps)
+    assert angle == pytest.approx(30.0, abs=1.0)
+    assert 0.6 < q < 0.7
+    start = sp_start.with_light_ellipticity(np.zeros(7), space.free_names, ell_comps)
+    assert start.tolist() == [0.0, 0.0, *ell_comps, *ell_comps, 0.0]
+    round_galaxy = SimpleNamespace(
+        pixel_centres=(x[~mask], y[~mask]), imaging=SimpleNamespace(data=np.zeros_like(x)),
+        mask=mask,
+    )  # fmt: skip
+    assert sp_start.light_moments(round_galaxy, space) == (0.0, 0.0)
 
 
 def test_start_json_is_reused_for_the_same_fingerprint_only(tmp_path, mock_start):
