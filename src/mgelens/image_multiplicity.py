@@ -129,10 +129,12 @@ def image_counts(
             near |= np.hypot(x - profile.centre[0], y - profile.centre[1]) < core_radius
     excluded = near[:-1, :-1] | near[1:, :-1] | near[:-1, 1:] | near[1:, 1:]
     px, py = source_x.ravel(), source_y.ravel()
+    if not px.size:
+        return np.zeros(source_x.shape, dtype=np.int64)
     size = 4.0 * grid_spacing
-    origin = np.array([px.min(), py.min()]) if px.size else np.zeros(2)
-    columns = int((px.max() - origin[0]) // size) + 1 if px.size else 1
-    rows = int((py.max() - origin[1]) // size) + 1 if px.size else 1
+    origin = np.array([px.min(), py.min()])
+    columns = int((px.max() - origin[0]) // size) + 1
+    rows = int((py.max() - origin[1]) // size) + 1
     bucket = ((py - origin[1]) // size).astype(np.int64) * columns + (
         (px - origin[0]) // size
     ).astype(np.int64)

@@ -41,7 +41,8 @@ from mgelens.grid import pixel_centres
 from mgelens.image_multiplicity import multiplicity_check
 from mgelens.imaging import MASK_FILE, Imaging
 from mgelens.imaging_input import ImagingError, read_fits_mask
-from mgelens.mask import SLACS_NOISE_THRESHOLD, circular, contaminants
+from mgelens.mask import circular, contaminants
+from mgelens.pipeline.fittable import informative_pixels
 from mgelens.pipeline.records import (
     MODEL_FILE,
     fit_record_of,
@@ -139,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
             mass,
             lensed,
             imaging.noise_map,
-            ~imaging.mask & (imaging.noise_map <= SLACS_NOISE_THRESHOLD),
+            informative_pixels(imaging, imaging.mask),
             x,
             y,
             mask_radius,

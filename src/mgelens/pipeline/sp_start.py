@@ -310,8 +310,8 @@ def _light_bounds(space: ParameterSpace, index: int) -> tuple[float, float]:
 def light_moments(dataset: FitDataset, space: ParameterSpace) -> tuple[float, float]:
     """ell_comps of the data's second moments (step 1's start): the fit pixels within
     :data:`MOMENTS_RADIUS` of the first free lens-light centre's prior mean (else of the
-    origin), weighted by their
-    positive data, about their weighted centroid; clipped to |ell_comps| ≤
+    origin), weighted by their positive data, about their weighted centroid; clipped to
+    |ell_comps| ≤
     :data:`LIGHT_ELL_COMPS_RANGE`. Round (0, 0) when fewer than three pixels carry light."""
     names = space.free_names
     first = next(
@@ -327,8 +327,8 @@ def light_moments(dataset: FitDataset, space: ParameterSpace) -> tuple[float, fl
         )
     px, py = dataset.pixel_centres
     data = dataset.imaging.data[~dataset.mask]
-    weight = np.where(np.hypot(px - centre[0], py - centre[1]) < MOMENTS_RADIUS, data, 0.0)
-    weight = np.clip(weight, 0.0, None)
+    near = np.hypot(px - centre[0], py - centre[1]) < MOMENTS_RADIUS
+    weight = np.where(near, np.clip(data, 0.0, None), 0.0)
     if np.count_nonzero(weight) < 3:
         return 0.0, 0.0
     mx, my = np.average(px, weights=weight), np.average(py, weights=weight)
