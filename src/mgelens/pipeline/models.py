@@ -567,13 +567,17 @@ def free_parameters(priors: Mapping[str, Prior]) -> list[Parameter]:
     return [lens_parameter(name, prior=prior) for name, prior in priors.items()]
 
 
-def light_centre(result: PhaseResult) -> tuple[float, float]:
-    """Max-likelihood centre of the first lens-light component of ``result`` (the shared
-    centre of the extended MGE sets or of the Sérsics)."""
-    values = result.max_likelihood
+def lens_light_centre(values: Mapping[str, float]) -> tuple[float, float]:
+    """Centre of the first lens-light component in ``values`` (``{name: value}`` in the
+    space's order; the shared centre of the extended MGE sets or of the Sérsics)."""
     first = next(
         n[: -len(".centre_x")]
-        for n in result.space.names
+        for n in values
         if n.startswith(LENS_LIGHT + ".") and n.endswith(".centre_x")
     )
     return values[f"{first}.centre_x"], values[f"{first}.centre_y"]
+
+
+def light_centre(result: PhaseResult) -> tuple[float, float]:
+    """Max-likelihood centre of the first lens-light component of ``result``."""
+    return lens_light_centre(result.max_likelihood)

@@ -11,10 +11,9 @@ the mass puts it; local optimisers started from round masses fall into the same 
    mean, ell_comps within ±0.6) maximises ln L + ln prior (Powell, :data:`LIGHT_CALLS`
    evaluations) under a mass of θ_E 0.01″, which lenses nothing: the source Gaussians sit
    on the centre as extra lens light. Every component's ell_comps start at the data's
-   second moments within :data:`MOMENTS_RADIUS` (:func:`light_moments`): from round,
-   400 evaluations left slacs1029+0420's bright, flattened galaxy at ln P −11,017 with
-   1,055 "arc" pixels of light residuals, which put θ_E at 2.6″ for Bolton's 1.01″; from
-   its moments, ln P 22,790 and 241 arc pixels.
+   second moments within :data:`MOMENTS_RADIUS` (:func:`light_moments`): from round, a
+   bright, flattened galaxy's stage can end far from its shape and leave light residuals
+   that step 2 takes for arcs (docs/slacs.md, "A bright, flattened lens").
 2. **Arcs.** Pixels whose normalised residual of that fit exceeds
    :data:`ARC_SIGNIFICANCE`, between :data:`ARC_INNER_RADIUS` and 0.9 R of the light
    centre (R the mask radius), each weighted by its residual flux. A faint source's arcs
@@ -307,24 +306,11 @@ def _light_bounds(space: ParameterSpace, index: int) -> tuple[float, float]:
     return prior.lower, prior.upper
 
 
-def light_moments(dataset: FitDataset, space: ParameterSpace) -> tuple[float, float]:
+def light_moments(dataset: FitDataset, centre: tuple[float, float]) -> tuple[float, float]:
     """ell_comps of the data's second moments (step 1's start): the fit pixels within
-    :data:`MOMENTS_RADIUS` of the first free lens-light centre's prior mean (else of the
-    origin), weighted by their positive data, about their weighted centroid; clipped to
-    |ell_comps| ≤
+    :data:`MOMENTS_RADIUS` of ``centre`` (arcsec; the lens-light prior's mean), weighted
+    by their positive data, about their weighted centroid; clipped to |ell_comps| ≤
     :data:`LIGHT_ELL_COMPS_RANGE`. Round (0, 0) when fewer than three pixels carry light."""
-    names = space.free_names
-    first = next(
-        (n[: -len(".centre_x")] for n in names
-         if n.startswith(f"{models.LENS_LIGHT}.") and n.endswith(".centre_x")),
-        None,
-    )  # fmt: skip
-    centre = (0.0, 0.0)
-    if first is not None:
-        centre = tuple(
-            float(space.priors[names.index(f"{first}.{axis}")].transform(0.5))
-            for axis in ("centre_x", "centre_y")
-        )
     px, py = dataset.pixel_centres
     data = dataset.imaging.data[~dataset.mask]
     near = np.hypot(px - centre[0], py - centre[1]) < MOMENTS_RADIUS
@@ -371,8 +357,7 @@ def arc_pixels(
         The lens-light centre (arcsec).
     """
     result = fit(dataset, model.build(light_fit_values))
-    prefix = next(n[: -len(".centre_x")] for n in light_fit_values if n.endswith(".centre_x"))
-    centre = (light_fit_values[f"{prefix}.centre_x"], light_fit_values[f"{prefix}.centre_y"])
+    centre = models.lens_light_centre(light_fit_values)
     px, py = dataset.pixel_centres
     distance = np.hypot(px - centre[0], py - centre[1])
     annulus = (distance > ARC_INNER_RADIUS) & (distance < ARC_OUTER_FRACTION * radius)
@@ -513,7 +498,8 @@ def search(
     names = space.free_names
     x = space.prior_transform(np.full(space.n_free, 0.5))
     x[names.index("mass.einstein_radius")] = NO_LENSING_EINSTEIN_RADIUS
-    x = with_light_ellipticity(x, names, light_moments(dataset, space))
+    centre = models.lens_light_centre(space.values(x))
+    x = with_light_ellipticity(x, names, light_moments(dataset, centre))
     light = [i for i, n in enumerate(names) if n.startswith(models.LENS_LIGHT + ".")]
     x, light_value = _maximise(
         posterior, x, light, [_light_bounds(space, i) for i in light], LIGHT_CALLS
