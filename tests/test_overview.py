@@ -21,6 +21,9 @@ from mgelens.light import MGESet, Sersic
 from mgelens.mask import circular
 from mgelens.mass import SIE
 from mgelens.overview import (
+    MIN_SOURCE_HALF_WIDTH,
+    SOURCE_ZOOM_FRACTION,
+    SOURCE_ZOOM_MARGIN,
     LightComponent,
     Overview,
     SourcePlane,
@@ -28,9 +31,11 @@ from mgelens.overview import (
     critical_lines,
     light_component,
     overview_from_fit,
+    source_window,
     voronoi_edges,
 )
 from mgelens.pipeline import run
+from mgelens.pipeline.products import source_plane_image
 from mgelens.pipeline.settings import LensSpec, settings_from_mapping
 from mgelens.plot.overview import (
     CONTOUR_RANGE,
@@ -213,6 +218,70 @@ def test_component_geometry_of_a_set_and_a_sersic():
     sersic = light_component("sersic_2", Sersic((0, 0), ell_comps_from(q, angle), 0.9, 4.0), [1])
     assert sersic.label == "Sérsic 2"
     assert sersic.semi_major == pytest.approx(0.9 / np.sqrt(q))
+
+
+def source_grid(n: int = 151, half: float = 1.5):
+    """Pixel-centre coordinates (X, Y) of an n × n source grid over ±``half`` arcsec
+    (row index increasing with +y) and its extent."""
+    x = -half + (np.arange(n) + 0.5) * 2.0 * half / n
+    return *np.meshgrid(x, x), (-half, half, -half, half)
+
+
+def test_source_window_zooms_on_a_compact_source():
+    X, Y, extent = source_grid()
+    image = np.exp(-((X - 0.4) ** 2 + (Y + 0.2) ** 2) / (2 * 0.03**2))
+    image[np.hypot(X, Y) > 1.4] = np.nan  # outside a mesh's hull
+    (cx, cy), half_width = source_window(image, extent)
+    assert abs(cx - 0.4) < 0.02
+    assert abs(cy + 0.2) < 0.02
+    # the 5 % contour (radius 0.03 √(2 ln 20) = 0.073″) is narrower than the minimum
+    assert half_width == MIN_SOURCE_HALF_WIDTH
+    bright = image >= SOURCE_ZOOM_FRACTION * np.nanmax(image)
+    assert np.all(np.abs(X[bright] - cx) < half_width)
+    assert np.all(np.abs(Y[bright] - cy) < half_width)
+
+
+def test_source_window_holds_the_caustic_with_its_margin():
+    X, Y, extent = source_grid()
+    image = np.exp(-((X - 0.4) ** 2 + (Y + 0.2) ** 2) / (2 * 0.03**2))
+    angle = np.linspace(0.0, 2 * np.pi, 200)
+    caustic = (0.3 * np.cos(angle), 0.3 * np.sin(angle))
+    (cx, cy), half_width = source_window(image, extent, caustic)
+    bright = image >= SOURCE_ZOOM_FRACTION * image.max()
+    xs = np.concatenate([X[bright], caustic[0]])
+    ys = np.concatenate([Y[bright], caustic[1]])
+    side = max(np.ptp(xs), np.ptp(ys))
+    assert half_width == pytest.approx((0.5 + SOURCE_ZOOM_MARGIN) * side)
+    assert cx == pytest.approx(0.5 * (xs.min() + xs.max()))
+    assert cy == pytest.approx(0.5 * (ys.min() + ys.max()))
+    for values, middle in ((xs, cx), (ys, cy)):
+        assert np.all(np.abs(values - middle) <= half_width - SOURCE_ZOOM_MARGIN * side + 1e-12)
+
+
+def test_source_window_keeps_an_extended_or_empty_source_whole():
+    X, Y, extent = source_grid()
+    assert source_window(np.exp(-(X**2 + Y**2) / (2 * 1.0**2)), extent) is None
+    assert source_window(np.zeros_like(X), extent) is None
+    assert source_window(np.full_like(X, np.nan), extent) is None
+
+
+@pytest.mark.parametrize("phase", ["sp", "spix1"])
+def test_a_zoomed_source_image_samples_the_same_source(capped_run, mock_dir, phase):
+    """A window a third of the grid's width about one of its pixel centres: every third
+    zoomed pixel centre is a pixel centre of the whole grid, and the two images agree
+    there (an MGE source in SP, the Voronoi reconstruction in SPix1)."""
+    fitted, _ = rebuilt(capped_run, phase, mock_dir)
+    full, pixel, centre = source_plane_image(fitted, shape=(31, 31))
+    row, col = 17, 14
+    window = ((centre[0] + (col - 15) * pixel, centre[1] + (row - 15) * pixel), pixel * 31 / 6)
+    zoomed, zoomed_pixel, zoomed_centre = source_plane_image(fitted, (31, 31), window)
+    assert zoomed_pixel == pytest.approx(pixel / 3)
+    assert zoomed_centre == pytest.approx(window[0])
+    coincident = full[row - 5 : row + 6, col - 5 : col + 6]
+    assert np.count_nonzero(coincident) > 60
+    np.testing.assert_allclose(
+        zoomed[0::3, 0::3], coincident, rtol=1e-9, atol=1e-12 * np.abs(full).max()
+    )
 
 
 # -- end to end on a capped SP -> SPix1 run ---------------------------------------------

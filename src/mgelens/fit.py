@@ -290,14 +290,22 @@ class SourceReconstruction:
     regularization_matrix: sparse.csc_matrix
     weights: SourceWeights
 
-    def image(self, shape: tuple[int, int] = (101, 101), half_width: float | None = None):
+    def image(
+        self,
+        shape: tuple[int, int] = (101, 101),
+        half_width: float | None = None,
+        centre: tuple[float, float] | None = None,
+    ):
         """Source interpolated (natural neighbour) on a regular grid for plots.
 
-        Returns (image, extent) with extent = (x_min, x_max, y_min, y_max) in arcsec for
+        The grid is a square of half-width ``half_width`` about ``centre`` (arcsec; by
+        default the mesh's bounding box, enlarged by 5 %, about its middle). Returns
+        (image, extent) with extent = (x_min, x_max, y_min, y_max) in arcsec for
         ``imshow(..., origin="lower", extent=extent)``; zero outside the mesh hull.
         """
         points = self.mesh.points
-        centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+        if centre is None:
+            centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
         if half_width is None:
             half_width = 0.5 * float(np.ptp(points, axis=0).max()) * 1.05
         pixel = 2.0 * half_width / shape[1]

@@ -209,6 +209,61 @@ def light_components(result: FitResult, names: Sequence[str]) -> tuple[LightComp
     return tuple(components)
 
 
+SOURCE_ZOOM_FRACTION = 0.05
+"""The source panel zooms on the grid points at or above this fraction of the source's
+peak (:func:`source_window`)."""
+SOURCE_ZOOM_MARGIN = 0.25
+"""... and the caustic, padded on each side by this fraction of their box's side."""
+MIN_SOURCE_HALF_WIDTH = 0.25
+"""Smallest half-width (arcsec) of the zoomed source panel."""
+
+
+def source_window(
+    image: np.ndarray,
+    extent: tuple[float, float, float, float],
+    caustic_line: tuple | None = None,
+) -> tuple[tuple[float, float], float] | None:
+    """The square (centre, half-width; arcsec) that the source panel shows.
+
+    A compact source on a mesh that spans the whole traced mask fills only a few pixels
+    of a grid over the mesh (docs/slacs.md, "Two lenses of the seventh run"). The panel
+    therefore shows the box around the grid points of ``image`` (on ``extent``, row
+    index increasing with +y) at or above :data:`SOURCE_ZOOM_FRACTION` of its peak,
+    together with the caustic (x, y arrays) if given, padded on each side by
+    :data:`SOURCE_ZOOM_MARGIN` of the box's longer side, at least
+    :data:`MIN_SOURCE_HALF_WIDTH`. ``None`` (show the whole grid) when the image has no
+    positive value or the window would not be smaller than the grid.
+    """
+    finite = np.where(np.isfinite(image), image, 0.0)
+    peak = float(finite.max()) if finite.size else 0.0
+    if not peak > 0.0:
+        return None
+    n_y, n_x = image.shape
+    x_min, x_max, y_min, y_max = extent
+    x = x_min + (np.arange(n_x) + 0.5) * (x_max - x_min) / n_x
+    y = y_min + (np.arange(n_y) + 0.5) * (y_max - y_min) / n_y
+    rows, cols = np.nonzero(finite >= SOURCE_ZOOM_FRACTION * peak)
+    xs, ys = [x[cols]], [y[rows]]
+    if caustic_line is not None:
+        xs.append(np.asarray(caustic_line[0], dtype=float))
+        ys.append(np.asarray(caustic_line[1], dtype=float))
+    xs, ys = np.concatenate(xs), np.concatenate(ys)
+    side = max(np.ptp(xs), np.ptp(ys))
+    half_width = max(0.5 * side + SOURCE_ZOOM_MARGIN * side, MIN_SOURCE_HALF_WIDTH)
+    if half_width >= 0.5 * max(x_max - x_min, y_max - y_min):
+        return None
+    centre = (0.5 * float(xs.min() + xs.max()), 0.5 * float(ys.min() + ys.max()))
+    return centre, float(half_width)
+
+
+def _grid_extent(
+    image: np.ndarray, pixel_scale: float, centre: tuple[float, float]
+) -> tuple[float, float, float, float]:
+    """(x_min, x_max, y_min, y_max), arcsec, of a grid's outer pixel edges."""
+    half_x, half_y = 0.5 * pixel_scale * image.shape[1], 0.5 * pixel_scale * image.shape[0]
+    return (centre[0] - half_x, centre[0] + half_x, centre[1] - half_y, centre[1] + half_y)
+
+
 def critical_lines(mass: Sequence) -> tuple[tuple | None, tuple | None]:
     """(tangential critical curve, caustic) of ``mass`` on the SPEC §3.4 grid, or
     (None, None) when it has no closed tangential critical curve within ±3″."""
@@ -253,8 +308,10 @@ def overview_from_fit(
     weighted = int(np.count_nonzero(dataset.noise_map <= SLACS_NOISE_THRESHOLD))
     curve, caustic_line = critical_lines(result.model.mass)
     image, source_pixel, centre = source_plane_image(result)
-    half_x, half_y = 0.5 * source_pixel * image.shape[1], 0.5 * source_pixel * image.shape[0]
-    extent = (centre[0] - half_x, centre[0] + half_x, centre[1] - half_y, centre[1] + half_y)
+    window = source_window(image, _grid_extent(image, source_pixel, centre), caustic_line)
+    if window is not None:
+        image, source_pixel, centre = source_plane_image(result, window=window)
+    extent = _grid_extent(image, source_pixel, centre)
     mesh_edges = None
     if result.source is not None:
         mesh_edges = voronoi_edges(result.source.mesh)

@@ -51,32 +51,42 @@ def _grid_header(pixel_scale: float, centre: tuple[float, float]) -> fits.Header
 
 
 def source_plane_image(
-    result: FitResult, shape: tuple[int, int] = SOURCE_PLANE_SHAPE
+    result: FitResult,
+    shape: tuple[int, int] = SOURCE_PLANE_SHAPE,
+    window: tuple[tuple[float, float], float] | None = None,
 ) -> tuple[np.ndarray, float, tuple[float, float]]:
     """Source-plane image of a fit with its pixel scale (arcsec) and centre (x, y arcsec).
 
     Pixelized sources are interpolated (natural neighbour) over their mesh's extent. An
     MGE source is evaluated at the grid points over the extent of the ray-traced unmasked
-    pixel centres.
+    pixel centres. ``window`` = (centre, half-width), arcsec, renders that square instead
+    (a zoom, :func:`mgelens.overview.source_window`).
     """
+    centre, half_width = (None, None) if window is None else window
     if result.source is not None:
-        image, extent = result.source.image(shape)
+        image, extent = result.source.image(shape, half_width, centre)
     else:
-        image, extent = _mge_source_image(result, shape)
+        image, extent = _mge_source_image(result, shape, centre, half_width)
     pixel_scale = (extent[1] - extent[0]) / shape[1]
     centre = (0.5 * (extent[0] + extent[1]), 0.5 * (extent[2] + extent[3]))
     return image, pixel_scale, centre
 
 
-def _mge_source_image(result: FitResult, shape: tuple[int, int]):
+def _mge_source_image(
+    result: FitResult,
+    shape: tuple[int, int],
+    centre: tuple[float, float] | None = None,
+    half_width: float | None = None,
+):
     source = result.model.source
     if not isinstance(source, MGESource):
         raise TypeError("the fit has neither a pixelized nor an MGE source")
-    dataset = result.dataset
-    x, y = pixel_centres(dataset.mask.shape, dataset.imaging.pixel_scale)
-    bx, by = mass_module.ray_trace(result.model.mass, x[~dataset.mask], y[~dataset.mask])
-    centre = (0.5 * (bx.min() + bx.max()), 0.5 * (by.min() + by.max()))
-    half_width = 0.5 * max(np.ptp(bx), np.ptp(by)) * 1.05
+    if centre is None or half_width is None:
+        dataset = result.dataset
+        x, y = pixel_centres(dataset.mask.shape, dataset.imaging.pixel_scale)
+        bx, by = mass_module.ray_trace(result.model.mass, x[~dataset.mask], y[~dataset.mask])
+        centre = (0.5 * (bx.min() + bx.max()), 0.5 * (by.min() + by.max()))
+        half_width = 0.5 * max(np.ptp(bx), np.ptp(by)) * 1.05
     pixel_scale = 2.0 * half_width / shape[1]
     gx, gy = pixel_centres(shape, pixel_scale, origin=centre)
     intensities = result.source_light_intensities
