@@ -65,7 +65,8 @@ class LightComponent:
 
 @dataclass(frozen=True, eq=False)
 class SourcePlane:
-    """Source-plane reconstruction on a regular grid (:func:`source_plane_image`), NaN
+    """Source-plane reconstruction on a regular grid (:func:`source_plane_image`) over the
+    square of :func:`source_window` (the whole source grid where it gives none), NaN
     outside a pixelized source's mesh.
 
     ``extent`` = (x_min, x_max, y_min, y_max) arcsec of the grid's outer pixel edges;
