@@ -258,3 +258,57 @@ def test_a_run_that_did_not_converge_is_not_checked(monkeypatch):
     assert not output.converged
     assert output.peak_gain is None
     assert not gains.runs
+
+
+def test_a_restart_that_settles_below_the_run_it_replaces_still_misses(monkeypatch):
+    """The first run (around the Gaussian's peak, ln L ≤ 0) fails its local search; every
+    restart returns a cloud around a lower point (ln L ≈ −50) whose own neighbourhood is
+    flat to the search. Each restart's best sample lies about 50 below the first run's, so
+    it misses the peak too: both restarts run, and the phase is not converged, its gain
+    the shortfall (as on slacs1451−0239's MASS, a 60-point restart 22.6 below the 30-point
+    run it replaced)."""
+    from mgelens.search import sampler
+
+    monkeypatch.setattr(peak_check, "peak_gain", Gains(4.5, 0.3, 0.3))
+    low = PEAK + np.array([3.0, 0.0])  # (3.0 / 0.3)² / 2 = 50 below the peak in ln L
+    runs = iter([PEAK, low, low])
+
+    def clouds(evaluation, settings, checkpoint, seed, log):
+        centre = next(runs)
+        samples = np.random.default_rng(seed).normal(centre, 0.05, (500, 2))
+        log_likelihoods = np.array([gaussian(x) for x in samples])
+        return equal_weight_run(
+            SPACE.free_names, samples, log_likelihoods, {"n_live": settings.n_live}, seed
+        )
+
+    monkeypatch.setattr(sampler, "_sample_with_plateau_restarts", clouds)
+    settings = dataclasses.replace(FAST, peak_restarts=2)
+    lines: list[str] = []
+    output = run_nested(gaussian, SPACE, settings, seed=3, log=lines.append)
+    assert sum("restart" in line and "live points and seed" in line for line in lines) == 2
+    assert output.settings["n_live"] == 80
+    assert not output.converged
+    assert 40.0 < output.peak_gain < 55.0  # the clouds reach within ~0.2 of their centres
+    assert any("below the earlier attempts'" in line for line in lines)
+
+
+def test_a_restart_that_climbs_above_the_run_it_replaces_is_kept(monkeypatch):
+    """The mirror case: the first run sits in the lower cloud and the restart around the
+    peak; the restart is 50 above, its own search flat, so it is kept, converged."""
+    from mgelens.search import sampler
+
+    monkeypatch.setattr(peak_check, "peak_gain", Gains(4.5, 0.3))
+    runs = iter([PEAK + np.array([3.0, 0.0]), PEAK])
+
+    def clouds(evaluation, settings, checkpoint, seed, log):
+        samples = np.random.default_rng(seed).normal(next(runs), 0.05, (500, 2))
+        log_likelihoods = np.array([gaussian(x) for x in samples])
+        return equal_weight_run(
+            SPACE.free_names, samples, log_likelihoods, {"n_live": settings.n_live}, seed
+        )
+
+    monkeypatch.setattr(sampler, "_sample_with_plateau_restarts", clouds)
+    output = run_nested(gaussian, SPACE, dataclasses.replace(FAST, peak_restarts=2), seed=3)
+    assert output.converged
+    assert output.settings["n_live"] == 40
+    assert output.peak_gain == 0.3

@@ -33,6 +33,14 @@ STEP_TOLERANCE = 0.05
 """Powell's ``xtol`` in whitened coordinates: 0.05 posterior σ."""
 
 
+def highest_log_posterior(space: ParameterSpace, output: SamplerOutput) -> tuple[int, float]:
+    """The index of ``output``'s sample with the highest ln L + ln prior (``space.log_prior``)
+    and that value."""
+    log_posteriors = output.log_likelihoods + np.array([space.log_prior(x) for x in output.samples])
+    best = int(np.argmax(log_posteriors))
+    return best, float(log_posteriors[best])
+
+
 def peak_gain(
     log_likelihood: Callable[[np.ndarray], float],
     space: ParameterSpace,
@@ -48,9 +56,7 @@ def peak_gain(
     samples' and the search's ln prior are ``space.log_prior``; points outside the priors'
     support and rejected samples count as rejected. The gain is ≥ 0 (ln units).
     """
-    log_posteriors = output.log_likelihoods + np.array([space.log_prior(x) for x in output.samples])
-    best = int(np.argmax(log_posteriors))
-    start = float(log_posteriors[best])
+    best, start = highest_log_posterior(space, output)
     x_best = output.samples[best].copy()
     covariance = np.atleast_2d(np.cov(output.samples.T, aweights=output.weights))
     eigenvalues, eigenvectors = np.linalg.eigh(covariance)

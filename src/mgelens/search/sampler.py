@@ -656,12 +656,16 @@ def _with_peak_restarts(
     """Check that ``output`` (converged) holds its peak
     (:func:`_peak_gain`); while it does not, sample afresh with twice the live points, up
     to ``settings.peak_restarts`` times (a restart that does not converge ends the loop).
-    The last attempt's output, with every attempt's calls, runtimes and resumes summed
-    (the checks' calls too) and its ``peak_gain``; not converged if it still misses the
-    peak."""
+    A restart's gain is also at least how far its highest ln L + ln prior falls below an
+    earlier attempt's: a restart that settles in a lower mode than the run it replaces
+    misses the peak too, however flat its own neighbourhood (docs/slacs.md,
+    slacs1451−0239). The last attempt's output, with every attempt's calls, runtimes and
+    resumes summed (the checks' calls too) and its ``peak_gain``; not converged if it
+    still misses the peak."""
     attempts = []
     check_calls = 0 if reference is None else 1  # the reference's one call
     reference_log_likelihood = None if reference is None else evaluation.counted(reference)
+    earlier_best = -np.inf
     for attempt in range(settings.peak_restarts + 1):
         if attempt:
             restart = replace(settings, n_live=settings.n_live * 2**attempt, peak_restarts=0)
@@ -680,6 +684,15 @@ def _with_peak_restarts(
             )
         gain, calls = _peak_gain(evaluation, settings, output, reference_log_likelihood, log)
         check_calls += calls
+        best = peak_check.highest_log_posterior(evaluation.space, output)[1]
+        if attempt:
+            shortfall = earlier_best - best
+            log(
+                f"{settings.method}: its highest ln L + ln prior is {shortfall:+.2f} below "
+                f"the earlier attempts' (tolerance {settings.peak_tolerance})"
+            )
+            gain = max(gain, shortfall)
+        earlier_best = max(earlier_best, best)
         attempts.append(replace(output, peak_gain=gain))
         if gain <= settings.peak_tolerance or not output.converged:
             break

@@ -76,7 +76,8 @@ discard_exploration
         reference's ln L above the run's highest (with neither, the run is not checked).
         If it exceeds ``peak_tolerance``, the run is started afresh with twice the live
         points and the next seed (own checkpoint ``<stem>-peak<k>``), up to this many
-        times. The output is the last attempt's, with every attempt's calls (and the
+        times; a restart's gain is at least how far its highest ln L + ln prior falls
+        below the earlier attempts'. The output is the last attempt's, with every attempt's calls (and the
         checks') summed and ``peak_gain`` recorded; one that still misses its peak is not
         converged.
     peak_tolerance : float
