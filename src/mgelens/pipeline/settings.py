@@ -388,7 +388,8 @@ config/paper.yaml) start SPix2 at 24. MASS, whose posterior is the result: nauti
 30 live points per source mesh (two meshes), stopped when the live set holds 5 % of the
 evidence and 300 effective samples are drawn; a run whose highest-posterior sample a
 local search raises by more than 2 in ln L + ln prior missed the peak of a narrow slope–θ_E ridge
-and is sampled again with 60, then 120 live points (``peak_restarts``). The measurements
+and is sampled again with 60, then 120 live points (``peak_restarts``), as is a restart
+whose best sample falls more than 2 below the run it replaced. The measurements
 behind each choice, and nautilus tried for SP, are in docs/slam.md, "Quick-profile
 samplers"."""
 
