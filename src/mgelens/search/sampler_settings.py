@@ -77,9 +77,9 @@ discard_exploration
         If it exceeds ``peak_tolerance``, the run is started afresh with twice the live
         points and the next seed (own checkpoint ``<stem>-peak<k>``), up to this many
         times; a restart's gain is at least how far its highest ln L + ln prior falls
-        below the earlier attempts'. The output is the last attempt's, with every attempt's calls (and the
-        checks') summed and ``peak_gain`` recorded; one that still misses its peak is not
-        converged.
+        below the earlier attempts'. The output is the last attempt's, with every
+        attempt's calls (and the checks') summed and ``peak_gain`` recorded; one that
+        still misses its peak is not converged.
     peak_tolerance : float
         ln L a check may gain before the run counts as missing its peak.
     peak_evaluations : int
