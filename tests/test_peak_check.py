@@ -260,6 +260,25 @@ def test_a_run_that_did_not_converge_is_not_checked(monkeypatch):
     assert not gains.runs
 
 
+def clouds_around(*centres):
+    """Stands for sampler._sample_with_plateau_restarts: each attempt returns 500
+    equal-weight samples (σ 0.05) of the Gaussian around the next of ``centres``."""
+    runs = iter(centres)
+
+    def clouds(evaluation, settings, checkpoint, seed, log):
+        samples = np.random.default_rng(seed).normal(next(runs), 0.05, (500, 2))
+        log_likelihoods = np.array([gaussian(x) for x in samples])
+        return equal_weight_run(
+            SPACE.free_names, samples, log_likelihoods, {"n_live": settings.n_live}, seed
+        )
+
+    return clouds
+
+
+LOW = PEAK + np.array([3.0, 0.0])
+"""(3.0 / 0.3)² / 2 = 50 below the Gaussian's peak in ln L."""
+
+
 def test_a_restart_that_settles_below_the_run_it_replaces_still_misses(monkeypatch):
     """The first run (around the Gaussian's peak, ln L ≤ 0) fails its local search; every
     restart returns a cloud around a lower point (ln L ≈ −50) whose own neighbourhood is
@@ -270,18 +289,7 @@ def test_a_restart_that_settles_below_the_run_it_replaces_still_misses(monkeypat
     from mgelens.search import sampler
 
     monkeypatch.setattr(peak_check, "peak_gain", Gains(4.5, 0.3, 0.3))
-    low = PEAK + np.array([3.0, 0.0])  # (3.0 / 0.3)² / 2 = 50 below the peak in ln L
-    runs = iter([PEAK, low, low])
-
-    def clouds(evaluation, settings, checkpoint, seed, log):
-        centre = next(runs)
-        samples = np.random.default_rng(seed).normal(centre, 0.05, (500, 2))
-        log_likelihoods = np.array([gaussian(x) for x in samples])
-        return equal_weight_run(
-            SPACE.free_names, samples, log_likelihoods, {"n_live": settings.n_live}, seed
-        )
-
-    monkeypatch.setattr(sampler, "_sample_with_plateau_restarts", clouds)
+    monkeypatch.setattr(sampler, "_sample_with_plateau_restarts", clouds_around(PEAK, LOW, LOW))
     settings = dataclasses.replace(FAST, peak_restarts=2)
     lines: list[str] = []
     output = run_nested(gaussian, SPACE, settings, seed=3, log=lines.append)
@@ -298,16 +306,7 @@ def test_a_restart_that_climbs_above_the_run_it_replaces_is_kept(monkeypatch):
     from mgelens.search import sampler
 
     monkeypatch.setattr(peak_check, "peak_gain", Gains(4.5, 0.3))
-    runs = iter([PEAK + np.array([3.0, 0.0]), PEAK])
-
-    def clouds(evaluation, settings, checkpoint, seed, log):
-        samples = np.random.default_rng(seed).normal(next(runs), 0.05, (500, 2))
-        log_likelihoods = np.array([gaussian(x) for x in samples])
-        return equal_weight_run(
-            SPACE.free_names, samples, log_likelihoods, {"n_live": settings.n_live}, seed
-        )
-
-    monkeypatch.setattr(sampler, "_sample_with_plateau_restarts", clouds)
+    monkeypatch.setattr(sampler, "_sample_with_plateau_restarts", clouds_around(LOW, PEAK))
     output = run_nested(gaussian, SPACE, dataclasses.replace(FAST, peak_restarts=2), seed=3)
     assert output.converged
     assert output.settings["n_live"] == 40
