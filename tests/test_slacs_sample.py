@@ -133,8 +133,9 @@ def test_the_readme_table_matches_the_saved_table(lenses):
 
 def test_the_flag_spares_every_fitted_mock_and_flags_the_failures(lenses):
     """Issue #29 item 3: the residual and lensing flags mark none of the fitted mocks
-    (M1–M3 and the thirteen lenstronomy mocks at SLACS size, docs/slacs/quality_mocks.csv)
-    and mark each of the paper's three failures; every saved flag is its thresholds'."""
+    (M1–M3, the thirteen lenstronomy mocks and the population mocks fitted so far at SLACS
+    size, docs/slacs/quality_mocks.csv) and mark each of the paper's three failures; every
+    saved flag is its thresholds'."""
     mocks = saved("quality_mocks.csv")
     assert {"M1", "M2", "M3"} <= set(mocks["mock"])
     assert len(mocks) >= 15
