@@ -665,7 +665,7 @@ def _with_peak_restarts(
     attempts = []
     check_calls = 0 if reference is None else 1  # the reference's one call
     reference_log_likelihood = None if reference is None else evaluation.counted(reference)
-    earlier_best = -np.inf
+    earlier_best = None
     for attempt in range(settings.peak_restarts + 1):
         if attempt:
             restart = replace(settings, n_live=settings.n_live * 2**attempt, peak_restarts=0)
@@ -682,17 +682,11 @@ def _with_peak_restarts(
                 seed + attempt,
                 log,
             )
-        gain, calls = _peak_gain(evaluation, settings, output, reference_log_likelihood, log)
+        gain, calls, best = _peak_gain(
+            evaluation, settings, output, reference_log_likelihood, earlier_best, log
+        )
         check_calls += calls
-        best = peak_check.highest_log_posterior(evaluation.space, output)[1]
-        if attempt:
-            shortfall = earlier_best - best
-            log(
-                f"{settings.method}: its highest ln L + ln prior is {shortfall:+.2f} below "
-                f"the earlier attempts' (tolerance {settings.peak_tolerance})"
-            )
-            gain = max(gain, shortfall)
-        earlier_best = max(earlier_best, best)
+        earlier_best = best if earlier_best is None else max(earlier_best, best)
         attempts.append(replace(output, peak_gain=gain))
         if gain <= settings.peak_tolerance or not output.converged:
             break
@@ -720,14 +714,16 @@ def _peak_gain(
     settings: SamplerSettings,
     output: SamplerOutput,
     reference_log_likelihood: float | None,
+    earlier_best: float | None,
     log: Callable[[str], None],
-) -> tuple[float, int]:
+) -> tuple[float, int, float]:
     """How far the run falls short of its peak: the gain in ln L + ln prior of a local
     search from its highest-posterior sample (:func:`peak_check.peak_gain`, unless
-    ``settings.peak_evaluations`` is 0) and the reference point's ln L above the
+    ``settings.peak_evaluations`` is 0), the reference point's ln L above the
     highest-likelihood sample's (the reference is the centre of the priors it passed, so
-    no prior pulls the posterior away from it); the larger gain (≥ 0) and the search's
-    calls."""
+    no prior pulls the posterior away from it) and, for a restart, the earlier attempts'
+    highest ln L + ln prior (``earlier_best``) above the run's; the largest gain (≥ 0),
+    the search's calls and the run's highest ln L + ln prior."""
     best = float(output.log_likelihoods.max())
     gain, calls = 0.0, 0
     if settings.peak_evaluations:
@@ -747,7 +743,15 @@ def _peak_gain(
             f"{settings.peak_tolerance})"
         )
         gain = max(gain, shortfall)
-    return gain, calls
+    best_posterior = peak_check.highest_log_posterior(evaluation.space, output)[1]
+    if earlier_best is not None:
+        shortfall = earlier_best - best_posterior
+        log(
+            f"{settings.method}: its highest ln L + ln prior is {shortfall:+.2f} below "
+            f"the earlier attempts' (tolerance {settings.peak_tolerance})"
+        )
+        gain = max(gain, shortfall)
+    return gain, calls, best_posterior
 
 
 def _with_restarts(attempts: list[SamplerOutput], plateau_restarts: int) -> SamplerOutput:
