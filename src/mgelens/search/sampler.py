@@ -747,8 +747,8 @@ def _peak_gain(
     if earlier_best is not None:
         shortfall = earlier_best - best_posterior
         log(
-            f"{settings.method}: its highest ln L + ln prior is {shortfall:+.2f} below "
-            f"the earlier attempts' (tolerance {settings.peak_tolerance})"
+            f"{settings.method}: the earlier attempts' highest ln L + ln prior is "
+            f"{shortfall:+.2f} against this run's (tolerance {settings.peak_tolerance})"
         )
         gain = max(gain, shortfall)
     return gain, calls, best_posterior
