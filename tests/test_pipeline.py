@@ -500,6 +500,7 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"positions_factor": "big"}, r"slam\.positions_factor must be a number > 0, got 'big'"),
         ({"fit": {"lp_centre_radius": -1}}, r"slam\.fit\.lp_centre_radius must be a number >="),
         ({"source_pixels": "many"}, r"slam\.source_pixels must be an integer >= 3, got 'many'"),
+        ({"mass_source_pixels": 2}, r"slam\.mass_source_pixels must be an integer >= 3, got 2"),
         ({"overlay_shape": [24]}, r"slam\.overlay_shape must be two integers >= 2"),
         ({"fit": {"psf_trim": 1}}, r"slam\.fit\.psf_trim must be a number in \[0, 1\), got 1"),
         ({"allow_unconverged": "yes"}, r"slam\.allow_unconverged must be true or false"),
@@ -1068,6 +1069,31 @@ def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, moc
     problem = mass_phase.problem(mock_dir, sersic_run, other, LENS)
     elsewhere = fit(problem.dataset, problem.model.build(values))
     assert abs(elsewhere.log_evidence - written) > 1e-3
+
+
+def test_mass_source_pixels_set_the_mass_meshes_alone(sersic_run, mock_dir):
+    """``mass_source_pixels`` gives MASS's meshes their own k-means pixel count, with
+    SPix2's hyper-parameters, while LIGHT keeps ``source_pixels``; unset, MASS takes
+    ``source_pixels``."""
+    assert sersic_settings().mass_source_pixels is None
+    assert profile_settings("quick").mass_source_pixels is None
+    assert profile_settings("paper").mass_source_pixels is None
+    assert sersic_settings().mass_pixels == 60
+    settings = sersic_settings(mass_source_pixels=90)
+    assert settings.mass_pixels == 90
+    mass = mass_phase.problem(mock_dir, sersic_run, settings, LENS)
+    light = light_phase.problem(mock_dir, sersic_run, settings, LENS)
+    default = mass_phase.problem(mock_dir, sersic_run, sersic_settings(), LENS)
+    assert mass.model.source.describe()["n_pixels"] == 90
+    assert default.model.source.describe()["n_pixels"] == 60
+    assert light.model.source.describe()["n_pixels"] == 60
+    values = default.space.values(
+        default.space.vector(PhaseResult.read(sersic_run / "mass").max_likelihood)
+    )
+    finer = fit(mass.dataset, mass.model.build(values))
+    coarse = fit(default.dataset, default.model.build(values))
+    assert (finer.source.fluxes.size, coarse.source.fluxes.size) == (90, 60)
+    assert finer.log_evidence != pytest.approx(coarse.log_evidence)
 
 
 def test_mass_meshes_sampled_side_by_side_draw_the_same_samples(sersic_run, mock_dir, tmp_path):

@@ -321,6 +321,18 @@ def test_one_phases_sampler_settings_reach_that_phase_only(tmp_path):
     assert """--slam '{"profile": "quick", "samplers": {"mass": {"n_live": 80}}}'""" in output
 
 
+def test_mass_source_pixels_reach_mass_only(tmp_path):
+    (tmp_path / "config.yaml").write_text("slam:\n  mass_source_pixels: 1000\n")
+    result = snakemake(
+        "results/M1/mass/result.json", "-n", "-p", "--configfile",
+        str(tmp_path / "config.yaml"), workdir=tmp_path,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    output = result.stdout + result.stderr
+    assert output.count('"mass_source_pixels"') == 1  # the temporary folder holds the words
+    assert """--slam '{"mass_source_pixels": 1000, "profile": "quick"}'""" in output
+
+
 SCHEMAS = ROOT / "workflow" / "schemas"
 
 

@@ -468,7 +468,8 @@ def light_candidate_labels(wildcards) -> str:
 def phase_settings(wildcards) -> str:
     """The config's slam: section as JSON, with the lens's `lens_light` settings
     (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
-    changing one phase's sampler reruns that phase (and the phases after it) only."""
+    changing one phase's sampler reruns that phase (and the phases after it) only;
+    `mass_source_pixels` goes to MASS only, likewise."""
     light = lens_light_settings(wildcards.lens)
     section = {**config["slam"], **light}
     fit = {**(config["slam"].get("fit") or {}), **light.get("fit", {})}
@@ -476,6 +477,8 @@ def phase_settings(wildcards) -> str:
         section["fit"] = fit
     samplers = section.pop("samplers", None) or {}
     phase = phase_name(wildcards)
+    if phase != "mass":
+        section.pop("mass_source_pixels", None)
     if phase in samplers:
         section["samplers"] = {phase: samplers[phase]}
     return json.dumps(section, sort_keys=True)

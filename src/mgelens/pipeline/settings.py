@@ -90,6 +90,12 @@ class SlamSettings:
         set ``fit.positive_only`` too (:func:`settings_from_mapping` refuses it otherwise).
     source_pixels : int
         k-means source pixels of SPix2, LIGHT and MASS (paper 1500).
+    mass_source_pixels : int or None
+        k-means source pixels of MASS's meshes alone, with SPix2's hyper-parameters;
+        None (both profiles): ``source_pixels``. The workflow passes it to MASS only, so
+        setting it reruns MASS and what follows. At 500 pixels the mesh SPix2 tuned its
+        hyper-parameters on stands far above other k-means seeds and the meshes' slopes
+        differ; 1,000 narrows both (docs/coverage.md, "The source mesh").
     overlay_shape : (int, int)
         (n_y, n_x) of the SPix1 overlay grid (paper 34×34).
     spix1_regularization : {"constant", "constant_split"}
@@ -166,6 +172,7 @@ class SlamSettings:
     profile: str = "quick"
     lens_light_model: str = "mge"
     source_pixels: int = 1500
+    mass_source_pixels: int | None = None
     overlay_shape: tuple[int, int] = (34, 34)
     spix1_regularization: str = "constant"
     kmeans_scheme: str = "2023"
@@ -198,6 +205,12 @@ class SlamSettings:
             object.__setattr__(self, name, value)
         object.__setattr__(self, "samplers", MappingProxyType(dict(self.samplers)))
 
+    @property
+    def mass_pixels(self) -> int:
+        """k-means source pixels of MASS's meshes: ``mass_source_pixels``, or
+        ``source_pixels`` where it is None."""
+        return self.source_pixels if self.mass_source_pixels is None else self.mass_source_pixels
+
     def to_dict(self) -> dict:
         """JSON-ready form (recorded in every result file)."""
         content = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
@@ -222,6 +235,10 @@ def _checked_fields(settings: SlamSettings) -> dict:
             checked[name] = values.number(key, value, **_NUMBERS[name])
         elif f.type is bool:
             checked[name] = values.boolean(key, value)
+    if settings.mass_source_pixels is not None:
+        checked["mass_source_pixels"] = values.integer(
+            "slam.mass_source_pixels", settings.mass_source_pixels, 3
+        )
     checked["overlay_shape"] = values.pair(
         "slam.overlay_shape",
         settings.overlay_shape,
