@@ -95,7 +95,7 @@ class SlamSettings:
         None (both profiles): ``source_pixels``. The workflow passes it to MASS only, so
         setting it reruns MASS and what follows. At 500 pixels the mesh SPix2 tuned its
         hyper-parameters on stands far above other k-means seeds and the meshes' slopes
-        differ; 1,000 narrows both (docs/coverage.md, "The source mesh").
+        differ (docs/coverage.md, "The source mesh").
     overlay_shape : (int, int)
         (n_y, n_x) of the SPix1 overlay grid (paper 34×34).
     spix1_regularization : {"constant", "constant_split"}
