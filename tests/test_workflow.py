@@ -309,28 +309,32 @@ def test_a_lens_light_column_and_a_slam_lens_light_setting_contradict(tmp_path):
     )
 
 
-def test_one_phases_sampler_settings_reach_that_phase_only(tmp_path):
-    (tmp_path / "config.yaml").write_text("slam:\n  samplers:\n    mass: {n_live: 80}\n")
+@pytest.mark.parametrize(
+    ("section", "key", "slam"),
+    [
+        (
+            "  samplers:\n    mass: {n_live: 80}\n",
+            '"n_live"',
+            """{"profile": "quick", "samplers": {"mass": {"n_live": 80}}}""",
+        ),
+        (
+            "  mass_source_pixels: 1000\n",
+            '"mass_source_pixels"',
+            """{"mass_source_pixels": 1000, "profile": "quick"}""",
+        ),
+    ],
+)
+def test_settings_of_mass_alone_reach_mass_only(tmp_path, section, key, slam):
+    """One phase's sampler settings, and ``mass_source_pixels``, go to MASS's --slam only."""
+    (tmp_path / "config.yaml").write_text("slam:\n" + section)
     result = snakemake(
         "results/M1/mass/result.json", "-n", "-p", "--configfile",
         str(tmp_path / "config.yaml"), workdir=tmp_path,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     output = result.stdout + result.stderr
-    assert output.count("n_live") == 1
-    assert """--slam '{"profile": "quick", "samplers": {"mass": {"n_live": 80}}}'""" in output
-
-
-def test_mass_source_pixels_reach_mass_only(tmp_path):
-    (tmp_path / "config.yaml").write_text("slam:\n  mass_source_pixels: 1000\n")
-    result = snakemake(
-        "results/M1/mass/result.json", "-n", "-p", "--configfile",
-        str(tmp_path / "config.yaml"), workdir=tmp_path,
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
-    output = result.stdout + result.stderr
-    assert output.count('"mass_source_pixels"') == 1  # the temporary folder holds the words
-    assert """--slam '{"mass_source_pixels": 1000, "profile": "quick"}'""" in output
+    assert output.count(key) == 1  # quoted: the temporary folder's name holds the words
+    assert f"--slam '{slam}'" in output
 
 
 SCHEMAS = ROOT / "workflow" / "schemas"
