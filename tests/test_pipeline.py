@@ -38,7 +38,7 @@ from mgelens.pipeline.settings import (
     settings_from_mapping,
 )
 from mgelens.recovery import true_light_refit
-from mgelens.search.priors import TruncatedGaussian, Uniform
+from mgelens.search.priors import LogUniform, TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult
 from mgelens.source.image_mesh import overlay_centres
 from mgelens.source_share import source_share
@@ -197,6 +197,36 @@ def test_fixed_components_take_the_earlier_maximum_likelihood(chain):
         mass.parameter("regularization.signal_scale").value
         == chain["spix2"].max_likelihood["regularization.signal_scale"]
     )
+
+
+def test_arcs_support_adds_spix2s_arc_threshold_and_later_phases_keep_it(chain):
+    """``source_support: arcs``: SPix2 samples ``mesh.arc_threshold`` (LogUniform(1e−3,
+    0.3)) beside its five hyper-parameters; LIGHT and MASS fix it at SPix2's best value,
+    and the k-means source then solves only the pixels the arcs reach."""
+    sp, spix1 = chain["sp"], chain["spix1"]
+    space = spix2_phase.space(sp, spix1, "arcs")
+    assert space.n_free == 6
+    assert space.parameter(models.ARC_THRESHOLD).prior == models.ARC_THRESHOLD_PRIOR
+    assert models.ARC_THRESHOLD_PRIOR == LogUniform(1e-3, 0.3)
+    spix2 = fake_result("spix2", space, {**SPIX2_VALUES, models.ARC_THRESHOLD: 0.05})
+    best = spix2.max_likelihood[models.ARC_THRESHOLD]
+    specs = models.mge_specs(4, True, PIXEL, MASK_RADIUS)
+    light = light_phase.space(specs, sp, spix1, spix2)
+    mass = mass_phase.space(chain["light"], spix1, spix2)
+    for later in (light, mass):
+        assert later.parameter(models.ARC_THRESHOLD).value == best
+        assert models.ARC_THRESHOLD not in later.free_names
+    x, y = pixel_centres((21, 21), PIXEL)
+    adapt = np.exp(-((np.hypot(x, y).ravel() - 1.0) ** 2) / 0.02)
+    values = {**SPIX2_VALUES, models.ARC_THRESHOLD: 0.05}
+    for support, expected in (("mask", None), ("arcs", adapt > 0.05 * adapt.max())):
+        kmeans = models.KMeansSourceModel(x.ravel(), y.ravel(), adapt, 40, support=support)
+        source = kmeans.build(values)
+        if expected is None:
+            assert source.arc_pixels is None
+        else:
+            assert np.array_equal(source.arc_pixels, expected)
+        assert kmeans.describe()["source_support"] == support
 
 
 SERSIC_VALUES = {
@@ -501,6 +531,7 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"fit": {"lp_centre_radius": -1}}, r"slam\.fit\.lp_centre_radius must be a number >="),
         ({"source_pixels": "many"}, r"slam\.source_pixels must be an integer >= 3, got 'many'"),
         ({"mass_source_pixels": 2}, r"slam\.mass_source_pixels must be an integer >= 3, got 2"),
+        ({"source_support": "ring"}, r"slam\.source_support must be one of \['mask', 'arcs'\]"),
         ({"overlay_shape": [24]}, r"slam\.overlay_shape must be two integers >= 2"),
         ({"fit": {"psf_trim": 1}}, r"slam\.fit\.psf_trim must be a number in \[0, 1\), got 1"),
         ({"allow_unconverged": "yes"}, r"slam\.allow_unconverged must be true or false"),

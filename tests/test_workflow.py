@@ -337,6 +337,22 @@ def test_settings_of_mass_alone_reach_mass_only(tmp_path, section, key, slam):
     assert f"--slam '{slam}'" in output
 
 
+def test_source_support_reaches_the_phases_from_spix2_on(tmp_path):
+    """``source_support`` changes SPix2's model, so SPix2, LIGHT and MASS get it, and SP
+    and SPix1 keep their --slam (and their results)."""
+    (tmp_path / "config.yaml").write_text("slam:\n  source_support: arcs\n")
+    result = snakemake(
+        "results/M1/mass/result.json", "-n", "-p", "--configfile",
+        str(tmp_path / "config.yaml"), workdir=tmp_path,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    commands = [line.split("mgelens phase ")[1] for line in result.stdout.splitlines()
+                if "mgelens phase " in line]  # fmt: skip
+    with_support = {line.split()[0] for line in commands if '"source_support": "arcs"' in line}
+    assert with_support == {"spix2", "light", "mass"}
+    assert len(commands) == 5
+
+
 SCHEMAS = ROOT / "workflow" / "schemas"
 
 

@@ -48,6 +48,7 @@ from mgelens.source.interpolate import natural_neighbour_weights, nearest_cell_w
 from mgelens.source.mapping import SourceWeights, mapping_matrix
 from mgelens.source.mesh import MeshError, VoronoiMesh
 from mgelens.source.schemes import INTERPOLATIONS
+from mgelens.source.support import reached_source_pixels
 
 BORDER_RULE_OF_EDGE_RULE = {"anchor": "nearest_point", "continuous": "polygon"}
 
@@ -243,6 +244,11 @@ class PixelizedSource:
         Sibson weights (paper) or nearest-cell mapping (older scheme).
     adapt_image : ndarray or None
         Slim adapt image Ξ (lensed source of an earlier fit), for adaptive schemes.
+    arc_pixels : ndarray or None
+        Slim bool image pixels that hold the lensed arcs
+        (:func:`mgelens.source.support.arc_pixels`). When given, only the source pixels
+        their traced sub-pixels reach are solved; the others are zero and leave the
+        system (:mod:`mgelens.source.support`). ``None``: the whole traced mask (paper).
     """
 
     image_plane_x: np.ndarray
@@ -250,6 +256,7 @@ class PixelizedSource:
     regularization: object
     interpolation: str = "natural_neighbour"
     adapt_image: np.ndarray | None = None
+    arc_pixels: np.ndarray | None = None
 
     def __post_init__(self):
         if self.interpolation not in INTERPOLATIONS:
@@ -283,7 +290,8 @@ class LensModel:
 
 @dataclass(frozen=True, eq=False)
 class SourceReconstruction:
-    """The pixelized source of a fit: its traced mesh, fluxes and regularization."""
+    """The pixelized source of a fit: its traced mesh, the flux of every mesh point (zero
+    off a support), and the regularization matrix H of the solved pixels."""
 
     mesh: VoronoiMesh
     fluxes: np.ndarray
@@ -388,7 +396,10 @@ class SourceOperator:
     """The pixelized source's part of the linear system for one mass model.
 
     ``mapping`` is f (N_I × N_S, sparse); the blurred mapping matrix B f is formed only
-    on request (:attr:`blurred_mapping`), the fit itself never needs it.
+    on request (:attr:`blurred_mapping`), the fit itself never needs it. With a
+    ``support`` (bool over the mesh points, :mod:`mgelens.source.support`) ``mapping``
+    and ``regularization_matrix`` hold the supported pixels' columns only, and the
+    linear unknowns are those pixels' fluxes.
     """
 
     mesh: VoronoiMesh
@@ -396,6 +407,21 @@ class SourceOperator:
     mapping: sparse.csr_matrix
     regularization_matrix: sparse.csc_matrix
     psf_operator: sparse.csr_matrix
+    support: np.ndarray | None = None
+
+    @property
+    def edge_pixels(self) -> np.ndarray:
+        """Bool over the solved pixels: those on the mesh's convex hull (SPEC §6.3)."""
+        edge = self.mesh.edge_pixels
+        return edge if self.support is None else edge[self.support]
+
+    def mesh_fluxes(self, fluxes: np.ndarray) -> np.ndarray:
+        """Flux of every mesh point from the solved pixels' ``fluxes`` (zero off the support)."""
+        if self.support is None:
+            return fluxes
+        full = np.zeros(self.support.size)
+        full[self.support] = fluxes
+        return full
 
     @cached_property
     def blurred_mapping(self) -> sparse.csr_matrix:
@@ -463,7 +489,21 @@ def pixelized_operator(dataset: FitDataset, mass, source: PixelizedSource) -> So
     indptr, indices, values = interpolate(mesh, bx, by)
     weights = SourceWeights(indptr, indices, values, dataset.settings.sub_size, mesh.n_points)
     h = source.regularization.matrix(mesh, weights, source.adapt_image)
-    return SourceOperator(mesh, weights, mapping_matrix(weights), h, dataset.source_psf_operator)
+    mapping = mapping_matrix(weights)
+    if source.arc_pixels is None:
+        return SourceOperator(mesh, weights, mapping, h, dataset.source_psf_operator)
+    support = reached_source_pixels(mapping, source.arc_pixels)
+    if not support.any():
+        raise MeshError("no source pixel is reached by the arc pixels")
+    kept = np.flatnonzero(support)
+    return SourceOperator(
+        mesh,
+        weights,
+        mapping[:, kept].tocsr(),
+        sparse.csc_matrix(h[kept][:, kept]),
+        dataset.source_psf_operator,
+        support,
+    )
 
 
 def source_light_columns(dataset: FitDataset, mass, sets: tuple[MGESet, ...]) -> np.ndarray:
@@ -506,9 +546,7 @@ def fit(
     fixed_zero = None
     constrained_source = settings.positive_only and not settings.free_source
     if operator is not None and constrained_source and settings.force_edge_pixels_to_zero:
-        fixed_zero = np.concatenate(
-            [np.zeros(dense.shape[1], dtype=bool), operator.mesh.edge_pixels]
-        )
+        fixed_zero = np.concatenate([np.zeros(dense.shape[1], dtype=bool), operator.edge_pixels])
     solution = solve_linear_system(
         q,
         d,
@@ -614,7 +652,9 @@ def _scored(dataset, model, solution, fixed, lens_columns, source_columns, opera
         regularization_term=regularization_term,
         log_det_curvature_regularization=log_det_fh,
         log_det_regularization=log_det_h,
-        source=SourceReconstruction(operator.mesh, fluxes, h, operator.weights),
+        source=SourceReconstruction(
+            operator.mesh, operator.mesh_fluxes(fluxes), h, operator.weights
+        ),
     )
 
 

@@ -469,7 +469,8 @@ def phase_settings(wildcards) -> str:
     """The config's slam: section as JSON, with the lens's `lens_light` settings
     (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
     changing one phase's sampler reruns that phase (and the phases after it) only;
-    `mass_source_pixels` goes to MASS only, likewise."""
+    `mass_source_pixels` goes to MASS only, and `source_support` to the phases from
+    SPix2 on, likewise."""
     light = lens_light_settings(wildcards.lens)
     section = {**config["slam"], **light}
     fit = {**(config["slam"].get("fit") or {}), **light.get("fit", {})}
@@ -479,6 +480,8 @@ def phase_settings(wildcards) -> str:
     phase = phase_name(wildcards)
     if phase != "mass":
         section.pop("mass_source_pixels", None)
+    if phase in ("sp", "spix1"):
+        section.pop("source_support", None)
     if phase in samplers:
         section["samplers"] = {phase: samplers[phase]}
     return json.dumps(section, sort_keys=True)

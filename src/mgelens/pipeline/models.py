@@ -15,7 +15,8 @@ Parameter names (stable, dotted; SPEC §8.1):
 * SP source MGE: ``source.set_0.centre_x``, ... (20 Gaussians, σ 0.01″–1.0″).
 * pixelized source: ``regularization.coefficient`` (constant schemes) or
   ``regularization.inner_coefficient``, ``.outer_coefficient``, ``.signal_scale``
-  (AdaptiveBrightnessSplit); k-means mesh ``mesh.weight_floor``, ``mesh.weight_power``.
+  (AdaptiveBrightnessSplit); k-means mesh ``mesh.weight_floor``, ``mesh.weight_power``
+  and, with the arcs' support, ``mesh.arc_threshold``.
 
 Coordinates in arcsec, ell_comps = (f cos 2φ, f sin 2φ) with φ CCW from +x (SPEC §2.1).
 Every phase's space also lists the parameters it keeps fixed (at an earlier phase's
@@ -35,11 +36,15 @@ from mgelens.pipeline.parameters import lens_parameter
 from mgelens.search.model import Parameter
 from mgelens.search.priors import Gaussian, LogUniform, Prior, TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult
+from mgelens.source import support
 from mgelens.source.image_mesh import kmeans_centres, kmeans_weights
 from mgelens.source.regularization import AdaptiveBrightnessSplit, Constant, ConstantSplit
 
 LENS_LIGHT, MASS, SHEAR, SOURCE = "lens_light", "mass", "shear", "source"
 MESH, REGULARIZATION = "mesh", "regularization"
+ARC_THRESHOLD = f"{MESH}.arc_threshold"
+ARC_THRESHOLD_PRIOR = LogUniform(1e-3, 0.3)
+"""SPix2's prior on the source support's arc threshold (fraction of the adapt image's peak)."""
 
 SOURCE_MGE_SIGMAS = log_spaced_sigmas(0.01, 1.0, 20)
 """σ (arcsec) of the SP source MGE: 20 Gaussians from 0.01″ to 1.0″ (SPEC §2.4)."""
@@ -369,6 +374,10 @@ class MeshSourceModel:
         "overlay" or "kmeans", for the record.
     signals : {"anchor", "weighted"}
         Adaptive signal average (adaptive schemes only).
+    arc_threshold : float or None
+        Source support: only the source pixels reached by the image pixels where the adapt
+        image exceeds this fraction of its peak are solved (:mod:`mgelens.source.support`);
+        None: the whole traced mask.
     """
 
     x: np.ndarray
@@ -379,14 +388,21 @@ class MeshSourceModel:
     adapt_image: np.ndarray | None = None
     mesh: str = "overlay"
     signals: str = "anchor"
+    arc_threshold: float | None = None
 
     def build(self, values: Mapping[str, float]) -> PixelizedSource:
+        arcs = (
+            None
+            if self.arc_threshold is None
+            else support.arc_pixels(self.adapt_image, self.arc_threshold)
+        )
         return PixelizedSource(
             self.x,
             self.y,
             regularization_from(values, self.regularization, self.offset, self.signals),
             self.interpolation,
             self.adapt_image,
+            arcs,
         )
 
     def describe(self) -> dict:
@@ -398,6 +414,7 @@ class MeshSourceModel:
             "interpolation": self.interpolation,
             "cross_offset": self.offset,
             **({"adaptive_signals": self.signals} if "adaptive" in self.regularization else {}),
+            **({"arc_threshold": self.arc_threshold} if self.arc_threshold is not None else {}),
         }
 
 
@@ -418,6 +435,9 @@ class KMeansSourceModel:
         Weight formula (SPEC §4.1).
     interpolation, offset, signals : str
         As in :class:`MeshSourceModel`.
+    support : {"mask", "arcs"}
+        The source's support (``SlamSettings.source_support``): with ``arcs`` the
+        hyper-parameter ``mesh.arc_threshold`` sets it.
     """
 
     pixel_x: np.ndarray
@@ -429,14 +449,15 @@ class KMeansSourceModel:
     interpolation: str = "natural_neighbour"
     offset: str = "anchor"
     signals: str = "anchor"
+    support: str = "mask"
 
     @classmethod
     def from_settings(
         cls, pixel_x: np.ndarray, pixel_y: np.ndarray, adapt_image: np.ndarray, settings
     ) -> "KMeansSourceModel":
         """The k-means source of the phases on these pixels and adapt image, with the
-        pixel count, seed, scheme, interpolation, cross offset and adaptive signals of
-        ``settings`` (:class:`~mgelens.pipeline.settings.SlamSettings`)."""
+        pixel count, seed, scheme, interpolation, cross offset, adaptive signals and
+        support of ``settings`` (:class:`~mgelens.pipeline.settings.SlamSettings`)."""
         return cls(
             pixel_x,
             pixel_y,
@@ -447,6 +468,7 @@ class KMeansSourceModel:
             settings.interpolation,
             settings.cross_offset,
             settings.adaptive_signals,
+            settings.source_support,
         )
 
     def centres(self, values: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -471,6 +493,7 @@ class KMeansSourceModel:
             self.adapt_image,
             "kmeans",
             self.signals,
+            values[ARC_THRESHOLD] if self.support == "arcs" else None,
         )
 
     def fixed(self, values: Mapping[str, float]) -> "FixedSourceModel":
@@ -492,6 +515,7 @@ class KMeansSourceModel:
             "interpolation": self.interpolation,
             "cross_offset": self.offset,
             "adaptive_signals": self.signals,
+            "source_support": self.support,
         }
 
 

@@ -58,6 +58,7 @@ MGE_SET_CHOICES = (2, 4, 6)
 SPIX1_REGULARIZATIONS = ("constant", "constant_split")
 KMEANS_SCHEMES = ("2023", "2024")
 CROSS_OFFSETS = ("anchor", "paper")
+SOURCE_SUPPORTS = ("mask", "arcs")
 PRIOR_PASSING_RULES = ("paper", "2024")
 SP_STARTS = ("prior", "search")
 SP_MASS_CENTRES = ("free", "light")
@@ -96,6 +97,14 @@ class SlamSettings:
         setting it reruns MASS and what follows. At 500 pixels the mesh SPix2 tuned its
         hyper-parameters on stands far above other k-means seeds and the meshes' slopes
         differ (docs/coverage.md, "The source mesh").
+    source_support : {"mask", "arcs"}
+        Where SPix2's, LIGHT's and MASS's pixelized source may hold light: wherever the
+        traced mask lands (``mask``, the paper's model), or only in the source pixels that
+        the lensed arcs reach, the image pixels where SPix1's adapt image exceeds
+        ``mesh.arc_threshold`` of its peak, a hyper-parameter SPix2 samples with the
+        regularization and passes on (``arcs``, :mod:`mgelens.source.support`). Outside the
+        ring the image plane is singly imaged, and there the paper's source copies the
+        lens light's outer wings (docs/recovery.md, "The source's support").
     overlay_shape : (int, int)
         (n_y, n_x) of the SPix1 overlay grid (paper 34×34).
     spix1_regularization : {"constant", "constant_split"}
@@ -173,6 +182,7 @@ class SlamSettings:
     lens_light_model: str = "mge"
     source_pixels: int = 1500
     mass_source_pixels: int | None = None
+    source_support: str = "mask"
     overlay_shape: tuple[int, int] = (34, 34)
     spix1_regularization: str = "constant"
     kmeans_scheme: str = "2023"
@@ -262,6 +272,7 @@ _CHOICES = {
     "prior_passing": PRIOR_PASSING_RULES,
     "sp_start": SP_STARTS,
     "sp_mass_centre": SP_MASS_CENTRES,
+    "source_support": SOURCE_SUPPORTS,
 }
 """Fields taking one of a few strings."""
 _INTEGERS = {
