@@ -174,3 +174,20 @@ def test_hull_pixels_inside_the_support_stay_zero_under_the_anchor_rule(lens):
     assert (edge & kept).any()
     assert np.all(result.source.fluxes[edge | ~kept] == 0.0)
     assert result.source.fluxes.max() > 0.0
+
+
+def test_a_warm_start_carries_over_between_masses_whose_supports_differ(lens):
+    """MASS warm-starts every sample's NNLS from one reference fit, while the support
+    follows each sample's mass: the reference's passive set over every mesh point is cut
+    to the sample's support, and the solution is the cold one."""
+    dataset = lens["dataset"]
+    reference = fit(dataset, _model(lens, 0.03))
+    other = dataclasses.replace(
+        _model(lens, 0.03), mass=(SIE((0.01, 0.0), 1.15, 0.78, 42.0), ExternalShear(0.02, -0.01))
+    )
+    cold = fit(dataset, other)
+    assert cold.source.support.sum() != reference.source.support.sum()
+    warm = fit(dataset, other, passive_start=reference.passive_set)
+    assert reference.passive_set.size == reference.n_lens_light + reference.source.fluxes.size
+    assert warm.log_evidence == pytest.approx(cold.log_evidence, rel=1e-10)
+    np.testing.assert_allclose(warm.source.fluxes, cold.source.fluxes, atol=1e-8)

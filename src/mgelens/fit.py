@@ -290,13 +290,15 @@ class LensModel:
 
 @dataclass(frozen=True, eq=False)
 class SourceReconstruction:
-    """The pixelized source of a fit: its traced mesh, the flux of every mesh point (zero
-    off a support), and the regularization matrix H of the solved pixels."""
+    """The pixelized source of a fit: its traced mesh, the flux of every mesh point, the
+    regularization matrix H of the solved pixels and, for a source with a support
+    (:mod:`mgelens.source.support`), which mesh points were solved (the others are zero)."""
 
     mesh: VoronoiMesh
     fluxes: np.ndarray
     regularization_matrix: sparse.csc_matrix
     weights: SourceWeights
+    support: np.ndarray | None = None
 
     def image(
         self,
@@ -377,6 +379,19 @@ class FitResult:
     def native(self, slim: np.ndarray) -> np.ndarray:
         """A slim vector on the native grid (zero outside the mask)."""
         return to_native(slim, self.dataset.mask)
+
+    @property
+    def passive_set(self) -> np.ndarray:
+        """Bool over [lens light | source light | every mesh point]: the unknowns the
+        non-negative solve left free (not clamped at zero); a warm start for :func:`fit`
+        of a similar model. Mesh points off a support are not passive."""
+        passive = ~self.solution.active_zero
+        if self.source is None or self.source.support is None:
+            return passive
+        n_dense = self.n_lens_light + self.n_source_light
+        points = np.zeros(self.source.support.size, dtype=bool)
+        points[self.source.support] = passive[n_dense:]
+        return np.concatenate([passive[:n_dense], points])
 
 
 def _traced_source_positions(dataset: FitDataset, mass, source: PixelizedSource):
@@ -520,9 +535,10 @@ def fit(
 ) -> FitResult:
     """Solve all linear light and source unknowns of ``model`` and score it (SPEC §6–7).
 
-    ``passive_start`` optionally warm-starts the non-negative solve: a bool mask over the
-    unknowns (lens light, source light, then source pixels), e.g. the final passive set
-    (``~result.solution.active_zero``) of a similar model with the same unknowns. The
+    ``passive_start`` optionally warm-starts the non-negative solve: a bool mask over
+    lens light, source light and every source mesh point, e.g. the
+    :attr:`FitResult.passive_set` of a similar model with the same unknowns (a source
+    with a support solves its supported points only, and takes their part). The
     solution is the same (to rounding); only the NNLS's iterations change
     (:func:`~mgelens.inversion.solve.solve_linear_system`).
 
@@ -542,6 +558,11 @@ def fit(
     if dense.shape[1] == 0 and operator is None:
         raise ValueError("the model has no linear light: give it lens light or a source")
     q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
+    if passive_start is not None and operator is not None and operator.support is not None:
+        n_dense = dense.shape[1]
+        passive_start = np.concatenate(
+            [passive_start[:n_dense], passive_start[n_dense:][operator.support]]
+        )
     settings = dataset.settings
     fixed_zero = None
     constrained_source = settings.positive_only and not settings.free_source
@@ -653,7 +674,7 @@ def _scored(dataset, model, solution, fixed, lens_columns, source_columns, opera
         log_det_curvature_regularization=log_det_fh,
         log_det_regularization=log_det_h,
         source=SourceReconstruction(
-            operator.mesh, operator.mesh_fluxes(fluxes), h, operator.weights
+            operator.mesh, operator.mesh_fluxes(fluxes), h, operator.weights, operator.support
         ),
     )
 

@@ -133,7 +133,7 @@ def reference_passive_set(problem: PhaseProblem) -> np.ndarray | None:
     except (models.UnphysicalSample, *FitError) as error:
         logger.info("NNLS warm start off: the prior medians cannot be fitted (%s)", error)
         return None
-    return ~reference.solution.active_zero
+    return reference.passive_set
 
 
 def sampler_for(settings: SamplerSettings, n_free: int) -> SamplerSettings:
