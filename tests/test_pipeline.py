@@ -227,6 +227,10 @@ def test_arcs_support_adds_spix2s_arc_threshold_and_later_phases_keep_it(chain):
         else:
             assert np.array_equal(source.arc_pixels, expected)
         assert kmeans.describe()["source_support"] == support
+    held = models.KMeansSourceModel(x.ravel(), y.ravel(), adapt, 40, support="arcs").fixed(
+        {**spix2.max_likelihood, models.ARC_THRESHOLD: 0.05}
+    )
+    assert held.source.support_mass == models.mass_profiles(spix2.max_likelihood)
 
 
 SERSIC_VALUES = {

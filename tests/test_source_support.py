@@ -191,3 +191,19 @@ def test_a_warm_start_carries_over_between_masses_whose_supports_differ(lens):
     assert reference.passive_set.size == reference.n_lens_light + reference.source.fluxes.size
     assert warm.log_evidence == pytest.approx(cold.log_evidence, rel=1e-10)
     np.testing.assert_allclose(warm.source.fluxes, cold.source.fluxes, atol=1e-8)
+
+
+def test_a_held_support_keeps_the_solved_pixels_of_its_mass(lens):
+    """LIGHT and MASS hold SPix2's support (``support_mass``): at another mass the same
+    mesh points are solved as at the held one, not those the new trace would reach."""
+    dataset = lens["dataset"]
+    held = _model(lens, 0.03)
+    moved = (SIE((0.01, 0.0), 1.15, 0.78, 42.0), ExternalShear(0.02, -0.01))
+    source = dataclasses.replace(held.source, support_mass=MASS)
+    at_held = fit(dataset, dataclasses.replace(held, source=source))
+    at_moved = fit(dataset, dataclasses.replace(held, mass=moved, source=source))
+    following = fit(dataset, dataclasses.replace(held, mass=moved))
+    assert np.array_equal(at_moved.source.support, at_held.source.support)
+    assert not np.array_equal(following.source.support, at_held.source.support)
+    assert at_moved.log_evidence != pytest.approx(following.log_evidence)
+    assert np.all(at_moved.source.fluxes[~at_held.source.support] == 0.0)

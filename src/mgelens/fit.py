@@ -71,6 +71,7 @@ class FitDataset:
     border: np.ndarray
     _columns_cache: dict = field(default_factory=dict, repr=False)
     _source_cache: dict = field(default_factory=dict, repr=False)
+    _support_cache: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def from_imaging(
@@ -131,6 +132,7 @@ class FitDataset:
             settings=replace(self.settings, positive_only=True),
             _columns_cache={},
             _source_cache={},
+            _support_cache={},
         )
 
     @cached_property
@@ -205,6 +207,17 @@ class FitDataset:
             }
         return self._columns_cache[key]
 
+    def held_support(self, source: "PixelizedSource") -> np.ndarray:
+        """The support of a source whose ``support_mass`` holds it: the mesh points its
+        arc pixels reach when traced through that mass, computed once per source object."""
+        cache = self._support_cache
+        if cache.get("source") is not source:
+            traced = replace(source, support_mass=None)
+            support = pixelized_operator(self, source.support_mass, traced).support
+            cache.clear()
+            cache.update(source=source, support=support)
+        return cache["support"]
+
     def repeated_source(self, mass, source: "PixelizedSource") -> "SourceSystem | None":
         """The source's fixed part of the linear system if the previous fit had the same
         mass model and the same source object, else ``None`` (then remembered as previous).
@@ -249,6 +262,11 @@ class PixelizedSource:
         (:func:`mgelens.source.support.arc_pixels`). When given, only the source pixels
         their traced sub-pixels reach are solved; the others are zero and leave the
         system (:mod:`mgelens.source.support`). ``None``: the whole traced mask (paper).
+    support_mass : tuple or None
+        Mass profiles through which the arc pixels are traced to find the support, held
+        for every fit of this source (LIGHT and MASS hold SPix2's), so that the solved
+        pixels do not change with the fitted mass and the evidence stays continuous in
+        it. ``None``: the fitted mass's own trace.
     """
 
     image_plane_x: np.ndarray
@@ -257,6 +275,7 @@ class PixelizedSource:
     interpolation: str = "natural_neighbour"
     adapt_image: np.ndarray | None = None
     arc_pixels: np.ndarray | None = None
+    support_mass: tuple | None = None
 
     def __post_init__(self):
         if self.interpolation not in INTERPOLATIONS:
@@ -507,7 +526,11 @@ def pixelized_operator(dataset: FitDataset, mass, source: PixelizedSource) -> So
     mapping = mapping_matrix(weights)
     if source.arc_pixels is None:
         return SourceOperator(mesh, weights, mapping, h, dataset.source_psf_operator)
-    support = reached_source_pixels(mapping, source.arc_pixels)
+    support = (
+        reached_source_pixels(mapping, source.arc_pixels)
+        if source.support_mass is None
+        else dataset.held_support(source)
+    )
     if not support.any():
         raise MeshError("no source pixel is reached by the arc pixels")
     kept = np.flatnonzero(support)

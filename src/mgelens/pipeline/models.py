@@ -24,7 +24,7 @@ maximum-likelihood values), so a result file describes its whole model.
 """
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import optimize
@@ -497,9 +497,13 @@ class KMeansSourceModel:
         )
 
     def fixed(self, values: Mapping[str, float]) -> "FixedSourceModel":
-        """Mesh and regularization of ``values`` frozen (LIGHT and MASS keep SPix2's source)."""
-        mesh = self.mesh_model(values)
-        return FixedSourceModel(mesh.build(values), {**self.describe(), "fixed": True})
+        """Mesh and regularization of ``values`` frozen (LIGHT and MASS keep SPix2's
+        source); an arcs' support is held at the mass of ``values`` (SPix2's), whatever
+        mass the phase samples."""
+        source = self.mesh_model(values).build(values)
+        if source.arc_pixels is not None:
+            source = replace(source, support_mass=mass_profiles(values))
+        return FixedSourceModel(source, {**self.describe(), "fixed": True})
 
     def build(self, values: Mapping[str, float]) -> PixelizedSource:
         return self.mesh_model(values).build(values)
