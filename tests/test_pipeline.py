@@ -1167,6 +1167,31 @@ def test_max_likelihood_problem_rebuilds_each_phases_written_fit(sersic_run, sp_
         assert refit.log_evidence == pytest.approx(written, abs=1e-6), folder
 
 
+def test_arcs_support_runs_from_spix2_to_mass_and_refits_its_written_fits(
+    sersic_run, mock_dir, tmp_path
+):
+    """``source_support: arcs`` on the capped chain: SP and SPix1 are the paper model's,
+    SPix2 samples the arc threshold, LIGHT and MASS solve SPix2's support only, and each
+    model.fits is refitted from result.json to 1e-6 in ln ε."""
+    for phase in ("sp", "spix1"):
+        shutil.copytree(sersic_run / phase, tmp_path / phase)
+    settings = sersic_settings(source_support="arcs")
+    for phase in ("spix2", "light", "mass"):
+        run.run_phase(phase, mock_dir, tmp_path, settings, LENS, seed=1, threads=1)
+    threshold = PhaseResult.read(tmp_path / "spix2").max_likelihood[models.ARC_THRESHOLD]
+    assert 1e-3 <= threshold <= 0.3
+    for phase in ("light", "mass"):
+        result = PhaseResult.read(tmp_path / phase)
+        assert result.max_likelihood[models.ARC_THRESHOLD] == threshold
+        assert models.ARC_THRESHOLD not in result.space.free_names
+        problem, values = run.max_likelihood_problem(result, mock_dir, tmp_path)
+        refit = fit(problem.dataset, problem.model.build(values))
+        written = fits.getheader(tmp_path / phase / records.MODEL_FILE)["LOGEVID"]
+        assert refit.log_evidence == pytest.approx(written, abs=1e-6)
+        assert refit.source.support is not None
+        assert problem.model.describe()["source"]["source_support"] == "arcs"
+
+
 @pytest.mark.parametrize(("chain", "phase"), [("sp_run", "sp"), ("sersic_run", "mass")])
 def test_true_light_refit_scores_the_fit_against_a_fixed_lens_light(
     chain, phase, request, mock_dir
