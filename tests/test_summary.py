@@ -151,7 +151,11 @@ def write_lens_folder(root, lens, theta, q, slope, names, measured, flag):
     model.fits}} with a posterior of three weighted samples about (θ_E, q, γ)."""
     folder = root / lens
     write_json(folder / "isophotes.json", lens_summary(lens, statistics(0.05, 3.0, 0.01, 30)))
-    write_json(folder / "mass" / "result.json", {"max_likelihood_fit": light_record(names)})
+    # the quality-flagged lens's MASS also missed its peak after the restarts; M1's
+    # record predates the peak check
+    sampler = {"peak_gain": 5.1 if flag else 0.4} if measured else {}
+    result = {"converged": not flag, "sampler": sampler, "max_likelihood_fit": light_record(names)}
+    write_json(folder / "mass" / "result.json", result)
     pd.DataFrame(
         {
             "weight": [1.0, 2.0, 1.0],
@@ -255,6 +259,10 @@ def test_lens_table_converts_and_compares(lens_folders, reference):
     assert math.isnan(sie["multiply_imaged_fraction"])
     assert pd.isna(sie["singly_imaged_flag"])
     assert math.isnan(mock["mass_light_offset"])
+    converged = [t["mass_converged"] for t in (sie, epl, mock)]
+    assert converged == [True, False, True]
+    assert (sie["mass_peak_gain"], epl["mass_peak_gain"]) == (0.4, 5.1)
+    assert math.isnan(mock["mass_peak_gain"])
     assert mock[["bolton_b_sie", "shajib_theta_e", "quality_statistic"]].isna().all()
 
 
@@ -458,6 +466,7 @@ def test_summary_command(tmp_path, lens_folders, reference, capsys):
     assert "quality_flagged: 1 of 2 measured" in printed
     assert "singly_imaged_flagged: 1 of 1 measured" in printed
     assert "lensing_flagged: 1 of 3" in printed
+    assert "mass_unconverged: 1 of 3 ['slacs0037-0942']" in printed
     assert "light_models_chosen: {'X2+point': 1} (1 by evidence)" in printed
     assert "theta_e_lt_vs_bolton: a = " in printed
     assert "theta_e_lt_vs_shajib: a = 0.958 (1 lens)" in printed

@@ -79,6 +79,14 @@ multiply_imaged_fraction        share of the lensed source's signal, Σ (LENSED/
                                 in quality records written before it)
 singly_imaged_flag              that share is below one half: θ_E rests mostly on the shape
                                 of single arcs (empty where not measured)
+mass_converged                  MASS's ``result.json`` says ``converged``: every source mesh's
+                                run met its stopping rule and held its peak after the
+                                restarts (a run the peak check still beats is recorded as not
+                                converged; ``allow_unconverged`` let the chain go on)
+mass_peak_gain                  the largest gain in ln L + ln prior that the peak check's
+                                local search found above the best sample of a MASS mesh's
+                                final run (:mod:`mgelens.search.peak_check`; NaN where the
+                                sampler has no check)
 ==============================  ==============================================================
 
 Published columns are NaN for lenses absent from a table, and all NaN (with a logged
@@ -104,9 +112,14 @@ import pandas as pd
 from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.isophotes import IsophoteStatistics, MassShape
 from mgelens.pipeline.model_choice import CHOICE_FILE, holds_choice
-from mgelens.pipeline.records import PhaseInputError, light_components, read_fit_record
+from mgelens.pipeline.records import (
+    PhaseInputError,
+    fit_record_of,
+    light_components,
+    read_result_record,
+)
 from mgelens.published import posterior_einstein_radius, published_values
-from mgelens.search.results import SAMPLES_FILE
+from mgelens.search.results import RESULT_FILE, SAMPLES_FILE
 
 logger = logging.getLogger(__name__)
 
@@ -159,6 +172,8 @@ FIT_COLUMNS = (
     "mass_light_offset",
     "multiply_imaged_fraction",
     "singly_imaged_flag",
+    "mass_converged",
+    "mass_peak_gain",
 )  # fmt: skip
 """Columns :func:`lens_table` adds to :data:`TABLE_COLUMNS`."""
 QUALITY_FILE = "quality.json"
@@ -365,7 +380,8 @@ def _fit_row(lens_folder: Path) -> dict:
     """The fit columns of one lens (not the published ones)."""
     mass = lens_folder / MASS_PHASE
     try:
-        record = read_fit_record(mass)
+        result = read_result_record(mass)
+        record = fit_record_of(result, mass / RESULT_FILE)
         posterior = posterior_einstein_radius(pd.read_csv(mass / SAMPLES_FILE))
         quality = json.loads((lens_folder / QUALITY_FILE).read_text())
         row = {"light_model": light_model_label(record), **_choice_columns(lens_folder, record)}
@@ -383,6 +399,8 @@ def _fit_row(lens_folder: Path) -> dict:
         row["lensing_flag"] = bool(quality["lensing"]["flag"])
         row["mass_light_offset"] = _number(quality["lensing"]["centre_offset"])
         row.update(_multiplicity_columns(quality))
+        row["mass_converged"] = bool(result["converged"])
+        row["mass_peak_gain"] = _number(result.get("sampler", {}).get("peak_gain"))
     except FileNotFoundError as exc:
         raise ValueError(f"{lens_folder}: {exc.filename} not found") from exc
     except PhaseInputError as exc:
@@ -439,4 +457,5 @@ def lens_table(
     fits["theta_e_over_shajib"] = fits["theta_e_lt"] / published["shajib_theta_e"]
     fits["quality_flag"] = fits["quality_flag"].astype("boolean")
     fits["singly_imaged_flag"] = fits["singly_imaged_flag"].astype("boolean")
+    fits["mass_converged"] = fits["mass_converged"].astype("boolean")
     return pd.concat([table, fits[list(FIT_COLUMNS)]], axis=1)
