@@ -351,6 +351,9 @@ def test_einstein_radius_figure(lens_folders, reference, tmp_path):
     legend = [t.get_text() for t in bolton.get_legend().get_texts()]
     assert "residuals flagged" in legend
     assert "lensing flagged" not in legend
+    crossed = [line for line in bolton.lines if line.get_label() == "MASS not converged"]
+    epl = table.set_index("lens").loc["slacs0037-0942"]  # its MASS missed its peak
+    np.testing.assert_allclose(crossed[0].get_xydata(), [[epl["bolton_b_sie"], epl["theta_e_lt"]]])
     table.loc[table["lens"] == "slacs0029-0055", "lensing_flag"] = True
     bolton = einstein_radius_figure(table).axes[0]
     boxed = [line for line in bolton.lines if line.get_label() == "lensing flagged"]

@@ -6,8 +6,9 @@ Two panels of a :func:`mgelens.summary.lens_table`: our θ_E^LT (MASS posterior 
 al. 2021's imaging-only power-law θ_E (with their 1σ errors). Each panel has the 1:1 line,
 a ±5 % band, the names of lenses off by more than 10 %, fits flagged by the residuals
 (``quality_flag``) circled in red, by the lensing check (``lensing_flag``) boxed in
-orange and singly imaged ones (``singly_imaged_flag``) in purple diamonds, and the
-least-squares slope of
+orange, singly imaged ones (``singly_imaged_flag``) in purple diamonds and lenses whose
+MASS did not converge (``mass_converged`` false) in grey crosses, and the least-squares
+slope of
 y = a·x (:func:`mgelens.published.slope_through_origin`). A panel without published values
 says so. :func:`slope_figure` sets our γ against Shajib's in the same way, naming the
 lenses whose slopes differ by more than :data:`mgelens.published.SLOPE_TENSION` combined
@@ -29,8 +30,10 @@ FLAG_MARKERS = (
     ("quality_flag", "o", "tab:red", "residuals flagged"),
     ("lensing_flag", "s", "tab:orange", "lensing flagged"),
     ("singly_imaged_flag", "D", "tab:purple", "singly imaged"),
+    ("mass_unconverged", "X", "tab:gray", "MASS not converged"),
 )
-"""(table column, marker, colour, legend label) of the flagged fits' outlines."""
+"""(flag, marker, colour, legend label) of the flagged fits' outlines: a table column, or
+``mass_unconverged``, ``mass_converged`` false."""
 PANELS = (
     ("bolton_b_sie", None, r"Bolton et al. 2008 $b_{\rm SIE}$ [arcsec]"),
     (
@@ -43,6 +46,8 @@ PANELS = (
 
 def _outline_flagged(ax: Axes, rows: pd.DataFrame, x: np.ndarray, y: np.ndarray) -> None:
     """Outline the points of fits flagged by each of :data:`FLAG_MARKERS`."""
+    if "mass_converged" in rows:
+        rows = rows.assign(mass_unconverged=rows["mass_converged"].eq(False))
     for flag, marker, colour, name in FLAG_MARKERS:
         if flag in rows:
             flagged = rows[flag].fillna(False).to_numpy(bool)
