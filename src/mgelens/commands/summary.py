@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         flags = table[f"{name}_flag"]
         print(f"{name}_flagged: {int(flags.sum())} of {int(flags.notna().sum())} measured")
     print(f"lensing_flagged: {int(table['lensing_flag'].sum())} of {len(table)}")
-    unconverged = table.loc[~table["mass_converged"].astype(bool), "lens"]
+    unconverged = table.loc[table["mass_converged"].eq(False), "lens"]
     print(f"mass_unconverged: {len(unconverged)} of {len(table)} {list(unconverged)}")
     for name, column in (("bolton", "bolton_b_sie"), ("shajib", "shajib_theta_e")):
         fit = slope_through_origin(table[column], table["theta_e_lt"])
