@@ -94,6 +94,20 @@ def test_module_closure_follows_relative_and_function_level_imports(tmp_path):
     ]
 
 
+def test_an_import_added_to_a_file_is_followed_in_the_same_process(tmp_path):
+    """The parsed imports are cached on each file's content, not its path: editing a file
+    between two closures in one process (as a test or a long session may) is seen."""
+    root = tmp_path / "mgelens"
+    root.mkdir()
+    for name in ("__init__.py", "entry.py", "late.py"):
+        (root / name).write_text("")
+    before = module_closure("mgelens.entry", root)
+    (root / "entry.py").write_text("from mgelens import late\n")
+    after = module_closure("mgelens.entry", root)
+    assert [p.name for p in before] == ["entry.py"]
+    assert [p.name for p in after] == ["__init__.py", "entry.py", "late.py"]
+
+
 def test_every_workflow_rule_is_keyed_on_the_command_it_runs():
     rules = Path(__file__).resolve().parents[1] / "workflow" / "rules"
     keyed = 0

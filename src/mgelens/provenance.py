@@ -49,8 +49,22 @@ def _imported_names(path: Path, module: str, package: str) -> set[str]:
     ``a/__init__.py`` and ``a/b/__init__.py``)."""
     is_package = path.name == "__init__.py"
     here = module if is_package else module.rpartition(".")[0]
+    found = set()
+    for name in _import_targets(path.read_bytes(), here, str(path)):
+        if name == package or name.startswith(package + "."):
+            parts = name.split(".")
+            found.update(".".join(parts[: k + 1]) for k in range(len(parts)))
+    return found
+
+
+@functools.cache
+def _import_targets(source: bytes, here: str, filename: str) -> frozenset[str]:
+    """Every name that the import statements of ``source`` (a module whose package is
+    ``here``, read from ``filename``) name, relative imports resolved. Cached on the
+    source's bytes: one snakemake start digests a dozen commands whose closures share
+    most files, and parsing is what costs."""
     names = set()
-    for node in ast.walk(ast.parse(path.read_bytes(), filename=str(path))):
+    for node in ast.walk(ast.parse(source, filename=filename)):
         if isinstance(node, ast.Import):
             names.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -61,12 +75,7 @@ def _imported_names(path: Path, module: str, package: str) -> set[str]:
                 base = node.module or ""
             names.add(base)
             names.update(f"{base}.{alias.name}" for alias in node.names)
-    found = set()
-    for name in names:
-        if name == package or name.startswith(package + "."):
-            parts = name.split(".")
-            found.update(".".join(parts[: k + 1]) for k in range(len(parts)))
-    return found
+    return frozenset(names)
 
 
 def module_closure(module: str, root: Path | None = None, package: str = "mgelens") -> list[Path]:
