@@ -129,9 +129,27 @@ def _search(problem):
     )
 
 
+SEARCH_SETTINGS = settings_from_mapping(
+    {"allow_unconverged": True, "sp_start": "search",
+     "samplers": {"sp": {"n_live": 36, "max_calls": 200, "progress_every": 1e9}}}
+)  # fmt: skip
+"""The start search with SP's sampler capped: the start is what these tests are about."""
+
+
 @pytest.fixture(scope="module")
-def mock_start(mock_problem):
-    return _search(mock_problem)
+def started_sp(mock_folder, tmp_path_factory):
+    """(folder, result) of run_phase("sp") with the start search on the mock, run once
+    for the module: the search costs about a minute."""
+    folder = tmp_path_factory.mktemp("started_sp")
+    return folder, run.run_phase("sp", mock_folder, folder, SEARCH_SETTINGS, LENS)
+
+
+@pytest.fixture(scope="module")
+def mock_start(started_sp):
+    """The search's start as the SP phase recorded it (start.json)."""
+    folder, _ = started_sp
+    recorded = json.loads((folder / "sp" / sp_start.START_FILE).read_text())
+    return sp_start.SPStart.from_dict(recorded["start"])
 
 
 def test_search_finds_the_mocks_mass_from_nothing_but_the_data(mock_problem, mock_start):
@@ -308,26 +326,22 @@ def test_start_json_is_reused_for_the_same_fingerprint_only(tmp_path, mock_start
 
 
 def test_sp_phase_samples_the_started_priors_and_reuses_its_start(
-    mock_folder, mock_start, tmp_path, caplog
+    mock_folder, mock_problem, started_sp, mock_start, tmp_path, caplog
 ):
     """run_phase("sp") with ``sp_start: search``: start.json written, result.json's priors
     passed from it; a rerun reads it back instead of searching again (same priors, so a
     checkpoint would resume). The sampler is capped: only the plumbing is tested here."""
-    settings = settings_from_mapping(
-        {"allow_unconverged": True, "sp_start": "search",
-         "samplers": {"sp": {"n_live": 36, "max_calls": 200, "progress_every": 1e9}}}
-    )  # fmt: skip
-    result = run.run_phase("sp", mock_folder, tmp_path, settings, LENS)
-    recorded = json.loads((tmp_path / "sp" / sp_start.START_FILE).read_text())
-    assert recorded["start"]["values"] == pytest.approx(mock_start.values)
+    folder, result = started_sp
     theta = result.space.parameter("mass.einstein_radius").prior
     assert theta.mean == pytest.approx(mock_start.values["mass.einstein_radius"])
     assert theta.sigma == pytest.approx(0.25 * theta.mean)
+    started = sp_start.started_space(mock_problem.space, mock_start)
+    assert result.space.to_dict() == started.to_dict()
     with caplog.at_level(logging.INFO, logger="mgelens.pipeline.sp_start"):
-        again = run.run_phase("sp", mock_folder, tmp_path, settings, LENS)
+        again = run.run_phase("sp", mock_folder, folder, SEARCH_SETTINGS, LENS)
     assert "SP start read from" in caplog.text
     assert again.space.to_dict() == result.space.to_dict()
-    prior = dataclasses.replace(settings, sp_start="prior")
+    prior = dataclasses.replace(SEARCH_SETTINGS, sp_start="prior")
     anchor = run.run_phase("sp", mock_folder, tmp_path / "prior", prior, LENS).space
     assert anchor.parameter("mass.einstein_radius").prior == models.EINSTEIN_RADIUS_PRIOR
     assert not (tmp_path / "prior" / "sp" / sp_start.START_FILE).exists()

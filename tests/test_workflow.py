@@ -598,6 +598,7 @@ mock:
 slam:
   profile: quick
   allow_unconverged: true
+  sp_start: prior
   source_pixels: 120
   overlay_shape: [12, 12]
   samplers:
@@ -608,7 +609,9 @@ slam:
     mass: {{max_calls: 250}}
 """
 """A one-lens sample with every sampler capped (MASS is the quick profile's nautilus): the
-DAG's plumbing, not a lens model, so each phase builds on unconverged earlier phases."""
+DAG's plumbing, not a lens model, so each phase builds on unconverged earlier phases. SP
+samples the anchor's priors: the quick profile's start search (9,440 likelihood calls,
+80 s of this test) has its own tests in test_sp_start.py."""
 
 
 @pytest.mark.slow
