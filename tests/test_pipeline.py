@@ -23,7 +23,7 @@ from mgelens.imaging import Imaging
 from mgelens.isophotes import STATISTICS_SMA_RANGE, isophote_table
 from mgelens.mask import contaminant_regions_from_noise
 from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
-from mgelens.pipeline import models, problem, products, records, run
+from mgelens.pipeline import mass_rescan, models, problem, products, records, run
 from mgelens.pipeline.phases import light as light_phase
 from mgelens.pipeline.phases import mass as mass_phase
 from mgelens.pipeline.phases import sp as sp_phase
@@ -690,6 +690,48 @@ def sp_run(mock_dir, tmp_path_factory):
     results = tmp_path_factory.mktemp("results")
     result = run.run_phase("sp", mock_dir, results, tiny_settings(), LENS, seed=3, threads=1)
     return results, result
+
+
+def test_spix1_samples_around_a_moved_rescan_with_its_own_image_positions(
+    sp_run, mock_dir, tmp_path, monkeypatch
+):
+    """When the rescan (:mod:`mgelens.pipeline.mass_rescan`, its search tested in
+    test_mass_rescan.py; here replaced by a fixed outcome) moves the mass, SPix1's mass and
+    shear priors are centred on the rescan's point with their passed widths, and SPix1
+    samples and records the images of its source's brightest point under that mass, which
+    MASS then reads; a second run reads rescan.json back."""
+    results, _ = sp_run
+    shutil.copytree(results / "sp", tmp_path / "sp")
+    settings = dataclasses.replace(
+        settings_from_mapping({"allow_unconverged": True,
+                               "samplers": {"spix1": {"max_iterations": 5}}}),
+        fit=tiny_settings().fit,
+    )  # fmt: skip
+    passed_space = spix1_phase.problem(mock_dir, tmp_path, settings, LENS).space
+    medians = passed_space.values(passed_space.prior_transform(np.full(passed_space.n_free, 0.5)))
+    moved = {n: medians[n] for n in passed_space.free_names}
+    moved |= {"mass.einstein_radius": 0.9 * medians["mass.einstein_radius"],
+              "mass.centre_x": medians["mass.centre_x"] + 0.03, "shear.gamma_1": 0.02}  # fmt: skip
+    outcome = mass_rescan.Rescan(medians["mass.einstein_radius"], 0, 0, 0, 0, 0, 0, 0, 0, moved,
+                                 100, 0.1)  # fmt: skip
+    calls = []
+    monkeypatch.setattr(mass_rescan, "rescan", lambda *a: calls.append(1) or outcome)
+    result = run.run_phase("spix1", mock_dir, tmp_path, settings, LENS)
+    for name in models.PASSED_MASS_NAMES:
+        prior, passed = result.space.parameter(name).prior, passed_space.parameter(name).prior
+        assert prior.mean == pytest.approx(moved[name])
+        assert prior.sigma == passed.sigma
+    sp_positions = json.loads((tmp_path / "sp" / "result.json").read_text())["max_likelihood_fit"]
+    spix1_positions = json.loads((tmp_path / "spix1" / "result.json").read_text())["settings"]
+    own = spix1_positions["positions"]
+    assert own != sp_positions["positions"]
+    penalty = models.PositionsPenalty(np.asarray(own["positions"]), own["threshold"])
+    assert len(penalty.positions) >= 2
+    mass = spix1_phase.problem(mock_dir, tmp_path, settings, LENS).model.build({**medians, **moved})
+    assert penalty.log_likelihood(mass.mass) is None  # they re-converge under the moved mass
+    assert penalty.separation(mass.mass) <= own["threshold"]
+    run.run_phase("spix1", mock_dir, tmp_path, settings, LENS)
+    assert len(calls) == 1
 
 
 def test_sp_phase_writes_its_folder_and_round_trips(sp_run, mock_dir):

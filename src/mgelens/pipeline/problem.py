@@ -221,12 +221,19 @@ class PhaseProblem:
     check, ``SamplerSettings.peak_restarts``)."""
 
 
-def positions_penalty(sp: EarlierPhase, settings: SlamSettings) -> models.PositionsPenalty | None:
-    """The positions penalty from SP's result if the settings ask for it (and SP found at
-    least two images), else ``None``."""
+def positions_penalty(
+    sp: EarlierPhase, settings: SlamSettings, spix1: EarlierPhase | None = None
+) -> models.PositionsPenalty | None:
+    """The positions penalty if the settings ask for it (and at least two images were
+    found), else ``None``: SP's image positions, or those SPix1 sampled with when
+    ``spix1`` is given (MASS), which differ from SP's where SPix1's rescan moved the mass
+    (:mod:`mgelens.pipeline.mass_rescan`)."""
     if not settings.positions_penalty:
         return None
-    record = sp.record.get("positions") or {"positions": []}
+    record = sp.record.get("positions")
+    if spix1 is not None and spix1.result.settings.get("positions"):
+        record = spix1.result.settings["positions"]
+    record = record or {"positions": []}
     positions = np.asarray(record["positions"], dtype=float).reshape(-1, 2)
     if len(positions) < 2:
         logger.warning(

@@ -47,7 +47,7 @@ from mgelens.atomic import atomic_path, write_json
 from mgelens.fit import FitDataset, FitError, FitResult, MGESource, figure_of_merit, fit
 from mgelens.grid import pixel_centres
 from mgelens.imaging import DATA_FILE
-from mgelens.pipeline import fittable, models, products, sp_start
+from mgelens.pipeline import fittable, mass_rescan, models, products, sp_start
 from mgelens.pipeline.phases import light, mass, sp, spix1, spix2
 from mgelens.pipeline.problem import PhaseProblem, phase_log
 from mgelens.pipeline.records import ADAPT_IMAGE_FILE, MODEL_FILE, fit_record, recorded_settings
@@ -421,14 +421,20 @@ def _mesh_run_record(problem: PhaseProblem, run: SamplerOutput, holds_best: bool
 
 
 def image_positions(result: FitResult, settings: SlamSettings) -> models.PositionsPenalty:
-    """Multiple images of the MGE source centre of a fit (SP) and their threshold.
+    """Multiple images of the MGE source centre of a fit (SP) and their threshold
+    (:func:`positions_of`)."""
+    return positions_of(result, result.model.source.sets[0].centre, settings)
 
-    Threshold = max(factor × the images' own source-plane scatter, minimum) (SPEC §12.21).
-    """
+
+def positions_of(
+    result: FitResult, source_centre: tuple[float, float], settings: SlamSettings
+) -> models.PositionsPenalty:
+    """The multiple images of ``source_centre`` (arcsec, source plane) under the mass of
+    the fit ``result``, within its mask, and their threshold: max(factor × the images'
+    own source-plane scatter, minimum) (SPEC §12.21)."""
     dataset = result.dataset
     x, y = pixel_centres(dataset.mask.shape, dataset.imaging.pixel_scale)
     x, y = np.where(dataset.mask, np.nan, x), np.where(dataset.mask, np.nan, y)
-    source_centre = result.model.source.sets[0].centre
     positions = models.multiple_image_positions(result.model.mass, source_centre, x, y)
     scatter = (
         models.PositionsPenalty(positions, 0.0).separation(result.model.mass)
@@ -525,6 +531,8 @@ def run_phase(
         checksums = input_checksums(first.inputs)
         if name == "sp" and settings.sp_start == "search":
             problems = [started_sp(first, folder, checksums)]
+        if name == "spix1" and settings.spix1_rescan:
+            problems = [rescanned_spix1(first, folder, checksums, settings)]
         return _solve(problems, folder, settings, lens, seed, lens_dir, checksums)
 
 
@@ -552,6 +560,38 @@ def started_sp(problem: PhaseProblem, folder: Path, checksums: dict) -> PhasePro
     )
     return dataclasses.replace(
         problem, space=sp_start.started_space(problem.space, start), reference=start.values
+    )
+
+
+def rescanned_spix1(
+    problem: PhaseProblem, folder: Path, checksums: dict, settings: SlamSettings
+) -> PhaseProblem:
+    """SPix1's problem with its mass and shear priors re-centred where its own rescan of
+    θ_E found a far better basin than SP's (:mod:`mass_rescan`; unchanged otherwise),
+    read from ``folder/rescan.json`` when it was made for the same inputs (``checksums``)
+    and settings. The rescan evaluates ln ε without the positions penalty, whose image
+    positions are SP's and hold SP's mass; a re-centred problem takes the images of its
+    source's brightest point under the rescan's mass instead (:func:`positions_of`; MASS
+    then reads them from SPix1's record), and the rescan's point is its ``reference``."""
+    space = problem.space
+    likelihood = PhaseLikelihood(problem.dataset, space, problem.model)
+    medians = space.values(space.prior_transform(np.full(space.n_free, 0.5)))
+    found = mass_rescan.read_or_rescan(
+        folder,
+        problem_fingerprint(problem, checksums),
+        lambda: mass_rescan.rescan(space, likelihood, models.lens_light_centre(medians)),
+    )
+    if not found.moved:
+        return problem
+    recentred = mass_rescan.recentred_space(space, found)
+    positions = problem.positions
+    if positions is not None:
+        result = fit(problem.dataset, problem.model.build({**medians, **found.values}))
+        brightest = result.source.mesh.points[np.argmax(result.source.fluxes)]
+        positions = positions_of(result, tuple(brightest), settings)
+        logger.info("positions penalty from the rescan's mass: %s", positions.describe())
+    return dataclasses.replace(
+        problem, space=recentred, reference=found.values, positions=positions
     )
 
 

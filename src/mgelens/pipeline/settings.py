@@ -140,6 +140,12 @@ class SlamSettings:
         ``config/paper.yaml`` for either profile). Without it SP settled in a degenerate
         mass on real imaging (docs/slacs.md), and on M1–M3 it needs fewer calls
         (docs/slam.md, "SP's start in the quick profile").
+    spix1_rescan : bool
+        Before SPix1 samples, scan θ_E with its pixelized source around SP's mass and, if a
+        basin beyond SP's is better by far, re-centre SPix1's passed mass and shear priors
+        on it (:mod:`mgelens.pipeline.mass_rescan`; on in the quick profile, off in the
+        paper's): SP's parametric source can prefer a wrong mass that no later phase
+        leaves (docs/coverage.md, "P05").
     sp_mass_centre : {"free", "light"}
         SP's SIE centre: free with the anchor's prior N(c, 0.1″) (``free``, SPEC §3.1), or
         tied to the lens light's shared centre (``light``: 15 free parameters instead of
@@ -193,6 +199,7 @@ class SlamSettings:
     adaptive_signals: str = "anchor"
     prior_passing: str = "paper"
     sp_start: str = "prior"
+    spix1_rescan: bool = False
     sp_mass_centre: str = "free"
     positions_penalty: bool = False
     positions_factor: float = 3.0
@@ -429,6 +436,7 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
             positions_penalty=True,
             adaptive_signals="weighted",
             sp_start="search",
+            spix1_rescan=True,
             mass_meshes=2,
             source_pixels=500,
             overlay_shape=(24, 24),

@@ -66,7 +66,6 @@ is deterministic and its record (``start.json`` in SP's folder) is reused when S
 on the same inputs and settings, so a resumed SP samples the same priors.
 """
 
-import json
 import logging
 import time
 from collections.abc import Callable, Sequence
@@ -76,11 +75,11 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage, optimize
 
-from mgelens.atomic import write_json
 from mgelens.fit import FitDataset, fit
 from mgelens.geometry import ell_comps_from
 from mgelens.mass import SIE, ExternalShear, ray_trace
 from mgelens.pipeline import models
+from mgelens.pipeline.fingerprinted import read_or_make
 from mgelens.pipeline.parameters import width_of
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
@@ -684,19 +683,6 @@ def started_space(space: ParameterSpace, start: SPStart) -> ParameterSpace:
 def read_or_search(folder: Path, fingerprint: dict, run: Callable[[], SPStart]) -> SPStart:
     """The start recorded in ``folder/start.json`` for ``fingerprint`` (the inputs and
     settings it was found for), else ``run()``'s, written there atomically with it."""
-    path = folder / START_FILE
-    fingerprint = json.loads(json.dumps(fingerprint))  # as read back from JSON
-    if path.is_file():
-        try:
-            content = json.loads(path.read_text())
-            recorded = SPStart.from_dict(content["start"])
-        except (ValueError, KeyError, TypeError) as error:
-            logger.warning("%s unreadable (%s): searching again", path, error)
-        else:
-            if content.get("fingerprint") == fingerprint:
-                logger.info("SP start read from %s", path)
-                return recorded
-            logger.info("%s was found for other inputs or settings: searching again", path)
-    start = run()
-    write_json(path, {"start": start.to_dict(), "fingerprint": fingerprint})
-    return start
+    return read_or_make(
+        folder / START_FILE, "start", fingerprint, run, SPStart.from_dict, logger, "SP start"
+    )

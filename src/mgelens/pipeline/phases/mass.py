@@ -88,5 +88,5 @@ def problem(
         models.PhaseModel(light.lens_light_specs, source),
         (*imaging_files(lens_dir), *earlier),
         radius,
-        positions_penalty(sp, settings),
+        positions_penalty(sp, settings, spix1),
     )

@@ -1,0 +1,225 @@
+"""SPix1's rescan of the Einstein radius: the pixelized source's view of SP's mass.
+
+SP fits a parametric (MGE) source. A source of several components can give that model a
+best mass far from the true one: on the coverage study's P05 (two spiral discs 0.5″
+apart) SP's likelihood climbs to θ_E 1.47″ for a true 1.18″ even when polished from the
+true mass, while SPix1's pixelized source prefers the truth by 5 × 10⁴ in ln ε
+(docs/coverage.md, "P05"). SPix1 samples priors passed around SP's mass, and along θ_E
+its ln ε is a row of narrow peaks, so its 24 live points stay in SP's basin and every
+later phase with them.
+
+Before SPix1 samples (``slam.spix1_rescan``, the quick profile):
+
+1. The reference point: SPix1's prior medians (SP's mass and shear) with the
+   regularization coefficient of highest ln P on :data:`COEFFICIENT_GRID`.
+2. A scan of θ_E over :data:`SCAN_RANGE` times the reference's, in relative steps of
+   :data:`SCAN_STEP`, every other value held.
+3. ``near``: the best scanned point within :data:`NEAR` of the reference's θ_E (the
+   reference included); ``far``: the best beyond. If ``far`` does not beat ``near`` by
+   :data:`THRESHOLD` in ln P, SPix1 keeps SP's priors: this is what happens when SP found
+   the lens's mass, at a cost of about 120 likelihood calls.
+4. Otherwise the mass and shear are polished from both (Powell, :data:`POLISH_CALLS`
+   each, the centre boxed around the light and the mass kept plausible as in SP's start,
+   :mod:`mgelens.pipeline.sp_start`), the coefficient chosen again on the grid after
+   each. If the best polished point beyond :data:`NEAR` of SP's θ_E beats SP's basin
+   (the best polished point within it; ``near`` if both polishes left it) by
+   :data:`THRESHOLD`, SPix1's mass and shear priors are re-centred on that point, their
+   widths as passed (SPEC §8.2).
+
+ln P is the phase's ln ε (positions penalty included) plus its ln prior. The outcome is
+recorded in ``spix1/rescan.json`` and read back for the same inputs and settings.
+"""
+
+import dataclasses
+import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from mgelens.pipeline import models, sp_start
+from mgelens.pipeline.fingerprinted import read_or_make
+from mgelens.search.model import ParameterSpace
+from mgelens.search.priors import TruncatedGaussian
+
+logger = logging.getLogger(__name__)
+
+RESCAN_FILE = "rescan.json"
+SCAN_RANGE = (0.6, 1.6)
+"""θ_E range of the scan, in units of the reference's θ_E."""
+SCAN_STEP = 0.01
+"""Relative step of the scan in θ_E: the peaks of ln ε along θ_E are a few per cent wide
+on P05."""
+NEAR = 0.05
+"""Relative distance in θ_E within which a scanned point belongs to SP's basin (SP's
+posterior is narrower than 1 % on every lens fitted)."""
+THRESHOLD = 50.0
+"""ln P by which a far point must beat SP's basin, in the scan and after the polishes:
+above the 1–91 by which two source meshes' evidences differ on the real lenses fitted
+(docs/coverage.md, "The source mesh")."""
+POLISH_CALLS = 1500
+"""Evaluations of each polish."""
+COEFFICIENT_GRID = 10.0 ** np.arange(-3.0, 5.01, 0.5)
+"""Regularization coefficients tried at each point the rescan compares."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Rescan:
+    """The rescan's record (``rescan.json``).
+
+    Attributes
+    ----------
+    reference_einstein_radius : float
+        θ_E of SP's mass, the scan's reference (arcsec).
+    near_einstein_radius, far_einstein_radius : float
+        θ_E of the best scanned point within and beyond :data:`NEAR` of it (arcsec).
+    near_log_posterior, far_log_posterior : float
+        Their ln P.
+    polished_near_einstein_radius, polished_near : float or None
+        θ_E (arcsec) and ln P where the polish from ``near`` ended (``None`` when the scan
+        did not call for the polishes).
+    polished_far_einstein_radius, polished_far : float or None
+        The same for the polish from ``far``.
+    values : dict or None
+        The free values that SPix1's priors were re-centred on, else ``None``: the better
+        of the polished points beyond :data:`NEAR` of SP's θ_E, if it beats SP's basin
+        (the best polished point within :data:`NEAR`, else ``near``) by
+        :data:`THRESHOLD`.
+    n_calls : int
+        Likelihood evaluations.
+    seconds : float
+        Wall-clock time.
+    """
+
+    reference_einstein_radius: float
+    near_einstein_radius: float
+    near_log_posterior: float
+    far_einstein_radius: float
+    far_log_posterior: float
+    polished_near_einstein_radius: float | None
+    polished_near: float | None
+    polished_far_einstein_radius: float | None
+    polished_far: float | None
+    values: dict | None
+    n_calls: int
+    seconds: float
+
+    @property
+    def moved(self) -> bool:
+        """Whether SPix1's priors were re-centred."""
+        return self.values is not None
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def _with_best_coefficient(posterior: sp_start._Posterior, x: np.ndarray) -> np.ndarray:
+    """``x`` with the regularization coefficient of highest ln P on the grid."""
+    index = posterior.space.free_names.index("regularization.coefficient")
+    trials = []
+    for coefficient in COEFFICIENT_GRID:
+        trial = x.copy()
+        trial[index] = coefficient
+        trials.append((posterior(trial), trial))
+    return max(trials, key=lambda pair: pair[0])[1]
+
+
+def _scan(posterior: sp_start._Posterior, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """θ_E on the scan's grid around ``x``'s and ln P there, every other value held."""
+    theta = posterior.space.free_names.index("mass.einstein_radius")
+    low, high = SCAN_RANGE
+    n = int(np.ceil(np.log(high / low) / np.log1p(SCAN_STEP))) + 1
+    radii = x[theta] * np.geomspace(low, high, n)
+    values = np.empty(n)
+    for k, radius in enumerate(radii):
+        trial = x.copy()
+        trial[theta] = radius
+        values[k] = posterior(trial)
+    return radii, values
+
+
+def _polish(
+    posterior: sp_start._Posterior, x: np.ndarray, centre: tuple[float, float]
+) -> tuple[np.ndarray, float]:
+    """Powell on the mass and shear from ``x`` (centre boxed around the light centre,
+    plausible mass and shear), then the coefficient on the grid."""
+    names = posterior.space.free_names
+    mass = [i for i, name in enumerate(names) if name in models.PASSED_MASS_NAMES]
+    half = sp_start.MASS_CENTRE_RANGE
+    box = {
+        names.index(f"mass.{axis}"): (c - half, c + half)
+        for axis, c in zip(("centre_x", "centre_y"), centre, strict=True)
+    }
+    boxed = posterior.boxed(box, sp_start.plausible_mass(names))
+    x, _ = sp_start._maximise(boxed, sp_start.made_plausible(x, names), mass, None, POLISH_CALLS)
+    posterior.boxed({})
+    x = _with_best_coefficient(posterior, x)
+    return x, posterior(x)
+
+
+def rescan(
+    space: ParameterSpace,
+    likelihood: Callable[[np.ndarray], float],
+    centre: tuple[float, float],
+) -> Rescan:
+    """Steps 1–4 on SPix1's problem (its passed-prior ``space``, its ``likelihood``, the
+    lens light's ``centre`` in arcsec); see the module."""
+    began = time.perf_counter()
+    posterior = sp_start._Posterior(likelihood, space)
+    reference = _with_best_coefficient(posterior, space.prior_transform(np.full(space.n_free, 0.5)))
+    theta = space.free_names.index("mass.einstein_radius")
+    radii, values = _scan(posterior, reference)
+    near = np.abs(radii / reference[theta] - 1.0) <= NEAR
+    near_index = int(np.flatnonzero(near)[np.argmax(values[near])])
+    far_index = int(np.flatnonzero(~near)[np.argmax(values[~near])])
+    near_x, far_x = reference.copy(), reference.copy()
+    near_value = posterior(reference)
+    if values[near_index] > near_value:
+        near_x[theta], near_value = radii[near_index], values[near_index]
+    far_x[theta], far_value = radii[far_index], values[far_index]
+    scanned = (float(near_x[theta]), float(near_value), float(far_x[theta]), float(far_value))
+    polished = [None, None, None, None]
+    moved = None
+    if far_value >= near_value + THRESHOLD:
+        points = [_polish(posterior, x, centre) for x in (near_x, far_x)]
+        polished = [float(points[0][0][theta]), points[0][1], float(points[1][0][theta]),
+                    points[1][1]]  # fmt: skip
+        beyond = [(v, x) for x, v in points if abs(x[theta] / reference[theta] - 1.0) > NEAR]
+        within = [v for x, v in points if abs(x[theta] / reference[theta] - 1.0) <= NEAR]
+        baseline = max(within) if within else near_value
+        if beyond and max(beyond, key=lambda pair: pair[0])[0] >= baseline + THRESHOLD:
+            best = max(beyond, key=lambda pair: pair[0])[1]
+            moved = dict(zip(space.free_names, best.tolist(), strict=True))
+    found = Rescan(float(reference[theta]), *scanned, *polished, moved, posterior.calls,
+                   time.perf_counter() - began)  # fmt: skip
+    logger.info(
+        "SPix1 rescan: ln P %.1f at θ_E %.3f″ (SP's basin), %.1f at %.3f″ beyond it; %s "
+        "(%d calls)", found.near_log_posterior, found.near_einstein_radius,
+        found.far_log_posterior, found.far_einstein_radius,
+        "priors re-centred on the far point" if found.moved else "SP's priors kept",
+        found.n_calls,
+    )  # fmt: skip
+    return found
+
+
+def recentred_space(space: ParameterSpace, found: Rescan) -> ParameterSpace:
+    """``space`` with the passed mass and shear priors re-centred on the rescan's point
+    (widths and limits kept); ``space`` itself if the rescan kept SP's basin."""
+    if not found.moved:
+        return space
+    for name in space.free_names:
+        prior = space.parameter(name).prior
+        if name in models.PASSED_MASS_NAMES and isinstance(prior, TruncatedGaussian):
+            value = float(np.clip(found.values[name], prior.lower, prior.upper))
+            space = space.with_prior(name, dataclasses.replace(prior, mean=value))
+    return space
+
+
+def read_or_rescan(folder: Path, fingerprint: dict, run: Callable[[], Rescan]) -> Rescan:
+    """The rescan recorded in ``folder/rescan.json`` for ``fingerprint`` (the inputs and
+    settings it was made for), else ``run()``'s, written there atomically with it."""
+    return read_or_make(
+        folder / RESCAN_FILE, "rescan", fingerprint, run, lambda d: Rescan(**d), logger,
+        "SPix1 rescan",
+    )  # fmt: skip

@@ -1,0 +1,163 @@
+"""SPix1's rescan of θ_E (mgelens.pipeline.mass_rescan) on analytic ln ε surfaces with a
+second basin, the re-centred priors, the record's reuse, and where MASS takes its image
+positions from."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from mgelens.pipeline import mass_rescan, models
+from mgelens.pipeline.problem import positions_penalty
+from mgelens.pipeline.settings import profile_settings, settings_from_mapping
+from mgelens.search.model import ParameterSpace
+from mgelens.search.priors import LogUniform, TruncatedGaussian
+
+SP_MASS = {
+    "mass.centre_x": 0.0,
+    "mass.centre_y": 0.0,
+    "mass.ell_comps_1": 0.05,
+    "mass.ell_comps_2": 0.0,
+    "mass.einstein_radius": 1.45,
+    "shear.gamma_1": 0.0,
+    "shear.gamma_2": 0.0,
+}
+"""SP's (wrong) mass: the passed priors' means."""
+TRUE_MASS = {
+    "mass.centre_x": 0.03,
+    "mass.centre_y": -0.02,
+    "mass.ell_comps_1": 0.0,
+    "mass.ell_comps_2": -0.04,
+    "mass.einstein_radius": 1.18,
+    "shear.gamma_1": 0.02,
+    "shear.gamma_2": -0.03,
+}
+WIDTHS = {"einstein_radius": 0.005, "centre_x": 0.05, "centre_y": 0.05}
+"""Widths of each basin in ln ε (arcsec); 0.03 for ell_comps and shear."""
+
+
+def spix1_space() -> ParameterSpace:
+    """SPix1's eight free parameters, the mass and shear around :data:`SP_MASS` (priors
+    wide enough that ln P is ln ε to within 0.1 at every point compared)."""
+    priors = {
+        name: TruncatedGaussian(value, 0.25 * value if name.endswith("radius") else 1.0,
+                                0.0 if name.endswith("radius") else -np.inf, np.inf)
+        for name, value in SP_MASS.items()
+    }  # fmt: skip
+    priors["regularization.coefficient"] = LogUniform(1e-6, 1e6)
+    return ParameterSpace.from_priors(priors)
+
+
+def basin(space, x, centre: dict, height: float) -> float:
+    values = space.values(x)
+    chi = [(values[n] - centre[n]) / WIDTHS.get(n.split(".")[1], 0.03) for n in centre]
+    coefficient = (np.log10(values["regularization.coefficient"]) - 1.0) ** 2
+    return height - 0.5 * float(np.sum(np.square(chi))) - coefficient
+
+
+def two_basins(space, far_height: float):
+    """ln ε: SP's basin (peak 0) and the true mass's (peak ``far_height``)."""
+
+    def likelihood(x):
+        return max(basin(space, x, SP_MASS, 0.0), basin(space, x, TRUE_MASS, far_height))
+
+    return likelihood
+
+
+def test_a_far_better_basin_recentres_the_mass_priors_on_it():
+    space = spix1_space()
+    found = mass_rescan.rescan(space, two_basins(space, 300.0), (0.0, 0.0))
+    assert found.reference_einstein_radius == pytest.approx(1.45, abs=1e-3)
+    assert abs(found.far_einstein_radius - 1.18) < 0.015  # the scan's 1 % grid
+    assert found.far_log_posterior > found.near_log_posterior + 250
+    assert found.moved
+    # the polish from SP's basin left it too, for the same far basin
+    assert found.polished_far > found.near_log_posterior + 290
+    assert found.polished_far_einstein_radius == pytest.approx(1.18, abs=0.002)
+    for name, truth in TRUE_MASS.items():
+        assert found.values[name] == pytest.approx(truth, abs=0.01), name
+    # ln ε alone peaks at 10; the LogUniform prior's 1/c makes 1 the grid's best ln P
+    assert found.values["regularization.coefficient"] == pytest.approx(1.0)
+    recentred = mass_rescan.recentred_space(space, found)
+    for name in TRUE_MASS:
+        before, after = space.parameter(name).prior, recentred.parameter(name).prior
+        assert after.mean == pytest.approx(found.values[name])
+        assert (after.sigma, after.lower, after.upper) == (before.sigma, before.lower, before.upper)
+    coefficient = "regularization.coefficient"
+    assert recentred.parameter(coefficient).prior == space.parameter(coefficient).prior
+
+
+def test_a_far_basin_below_the_threshold_keeps_sps_priors_after_the_scan_alone():
+    space = spix1_space()
+    height = mass_rescan.THRESHOLD - 10.0
+    found = mass_rescan.rescan(space, two_basins(space, height), (0.0, 0.0))
+    assert not found.moved
+    assert found.polished_near is None
+    assert found.polished_far is None
+    assert found.near_einstein_radius == pytest.approx(1.45, abs=1e-3)
+    assert found.far_log_posterior < found.near_log_posterior + mass_rescan.THRESHOLD
+    n_scan = int(np.ceil(np.log(1.6 / 0.6) / np.log(1.01))) + 1
+    assert found.n_calls == len(mass_rescan.COEFFICIENT_GRID) + n_scan + 1
+    assert mass_rescan.recentred_space(space, found) is space
+
+
+@pytest.mark.parametrize("far_height", [45.0, 80.0])
+def test_the_polished_basins_decide_against_the_threshold(far_height):
+    """SP's values sit 5 widths from their own basin's peak in the mass centre, so the scan
+    finds the far point 57 or 92 above them. Polished, SP's basin (which its polish does
+    not leave) comes within 45 of the far one, under the threshold, and SP's priors are
+    kept; or within 80, and they move."""
+    space = spix1_space()
+    own_peak = {**SP_MASS, "mass.centre_x": 0.25}
+    far = {**SP_MASS, "mass.einstein_radius": 1.18}
+
+    def likelihood(x):
+        return max(basin(space, x, own_peak, 0.0), basin(space, x, far, far_height))
+
+    found = mass_rescan.rescan(space, likelihood, (0.0, 0.0))
+    assert found.far_log_posterior >= found.near_log_posterior + mass_rescan.THRESHOLD
+    assert found.polished_near_einstein_radius == pytest.approx(1.45, abs=0.002)
+    assert found.polished_far_einstein_radius == pytest.approx(1.18, abs=0.002)
+    assert found.polished_far - found.polished_near == pytest.approx(far_height, abs=1.0)
+    assert found.moved is (far_height > mass_rescan.THRESHOLD)
+
+
+def test_the_rescan_record_is_reused_for_the_same_fingerprint_only(tmp_path):
+    space = spix1_space()
+    calls = []
+
+    def run():
+        calls.append(1)
+        return mass_rescan.rescan(space, two_basins(space, 1000.0), (0.0, 0.0))
+
+    first = mass_rescan.read_or_rescan(tmp_path, {"inputs": "a"}, run)
+    again = mass_rescan.read_or_rescan(tmp_path, {"inputs": "a"}, run)
+    assert len(calls) == 1
+    assert again == first
+    mass_rescan.read_or_rescan(tmp_path, {"inputs": "b"}, run)
+    assert len(calls) == 2
+
+
+def test_mass_takes_the_image_positions_spix1_sampled_with():
+    settings = settings_from_mapping({"positions_penalty": True})
+    sp_positions = {"positions": [[1.0, 0.0], [-1.0, 0.1]], "threshold": 0.2}
+    spix1_positions = {"positions": [[0.0, 1.2], [0.1, -1.1], [0.9, 0.3]], "threshold": 0.25}
+    sp = SimpleNamespace(record={"positions": sp_positions})
+    spix1 = SimpleNamespace(result=SimpleNamespace(settings={"positions": spix1_positions}))
+    older = SimpleNamespace(result=SimpleNamespace(settings={}))
+    penalty = positions_penalty(sp, settings, spix1)
+    np.testing.assert_array_equal(penalty.positions, spix1_positions["positions"])
+    assert penalty.threshold == 0.25
+    for earlier in (None, older):
+        penalty = positions_penalty(sp, settings, earlier)
+        np.testing.assert_array_equal(penalty.positions, sp_positions["positions"])
+    off = settings_from_mapping({"positions_penalty": False})
+    assert positions_penalty(sp, off, spix1) is None
+    assert isinstance(positions_penalty(sp, settings), models.PositionsPenalty)
+
+
+def test_the_quick_profile_rescans_and_the_paper_profile_does_not():
+    assert profile_settings("quick").spix1_rescan is True
+    assert profile_settings("paper").spix1_rescan is False
+    with pytest.raises(ValueError, match=r"slam\.spix1_rescan"):
+        settings_from_mapping({"spix1_rescan": "yes please"})
