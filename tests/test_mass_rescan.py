@@ -101,6 +101,22 @@ def test_a_far_basin_below_the_threshold_keeps_sps_priors_after_the_scan_alone()
     assert mass_rescan.recentred_space(space, found) is space
 
 
+def test_a_far_basin_that_is_not_lensed_is_never_taken():
+    """SPix1's ``lensing`` check (several images of the source's brightest point) refuses
+    the far point: an unlensed copy of the image, which a pixelized source fits well."""
+    space = spix1_space()
+    asked = []
+
+    def lensing(values):
+        asked.append(values["mass.einstein_radius"])
+        return False
+
+    found = mass_rescan.rescan(space, two_basins(space, 300.0), (0.0, 0.0), lensing)
+    assert asked == [pytest.approx(1.18, abs=0.002)]
+    assert found.polished_far > found.near_log_posterior + 290
+    assert not found.moved
+
+
 @pytest.mark.parametrize("far_height", [45.0, 80.0])
 def test_the_polished_basins_decide_against_the_threshold(far_height):
     """SP's values sit 5 widths from their own basin's peak in the mass centre, so the scan

@@ -162,9 +162,13 @@ def rescan(
     space: ParameterSpace,
     likelihood: Callable[[np.ndarray], float],
     centre: tuple[float, float],
+    lensing: Callable[[dict], bool] | None = None,
 ) -> Rescan:
     """Steps 1–4 on SPix1's problem (its passed-prior ``space``, its ``likelihood``, the
-    lens light's ``centre`` in arcsec); see the module."""
+    lens light's ``centre`` in arcsec); see the module. ``lensing`` (free values → bool),
+    if given, must accept the far point too: SPix1 passes whether that mass forms several
+    images of its source's brightest point, so that an unlensed, demagnified copy of the
+    image, which a pixelized source can fit well, is never taken."""
     began = time.perf_counter()
     posterior = sp_start._Posterior(likelihood, space)
     reference = _with_best_coefficient(posterior, space.prior_transform(np.full(space.n_free, 0.5)))
@@ -191,6 +195,9 @@ def rescan(
         if beyond and max(beyond, key=lambda pair: pair[0])[0] >= baseline + THRESHOLD:
             best = max(beyond, key=lambda pair: pair[0])[1]
             moved = dict(zip(space.free_names, best.tolist(), strict=True))
+            if lensing is not None and not lensing(moved):
+                logger.info("SPix1 rescan: the far basin forms one image of its source")
+                moved = None
     found = Rescan(float(reference[theta]), *scanned, *polished, moved, posterior.calls,
                    time.perf_counter() - began)  # fmt: skip
     logger.info(

@@ -570,28 +570,41 @@ def rescanned_spix1(
     θ_E found a far better basin than SP's (:mod:`mass_rescan`; unchanged otherwise),
     read from ``folder/rescan.json`` when it was made for the same inputs (``checksums``)
     and settings. The rescan evaluates ln ε without the positions penalty, whose image
-    positions are SP's and hold SP's mass; a re-centred problem takes the images of its
-    source's brightest point under the rescan's mass instead (:func:`positions_of`; MASS
-    then reads them from SPix1's record), and the rescan's point is its ``reference``."""
+    positions are SP's and hold SP's mass, and moves only to a mass that forms several
+    images of its source's brightest point; a re-centred problem takes those images for
+    its positions penalty (:func:`positions_of`; MASS then reads them from SPix1's
+    record), and the rescan's point is its ``reference``."""
     space = problem.space
     likelihood = PhaseLikelihood(problem.dataset, space, problem.model)
     medians = space.values(space.prior_transform(np.full(space.n_free, 0.5)))
+
+    def images(values: dict) -> models.PositionsPenalty:
+        """The images of the source's brightest point under the mass of ``values``."""
+        result = fit(problem.dataset, problem.model.build({**medians, **values}))
+        brightest = result.source.mesh.points[np.argmax(result.source.fluxes)]
+        return positions_of(result, tuple(brightest), settings)
+
     found = mass_rescan.read_or_rescan(
         folder,
         problem_fingerprint(problem, checksums),
-        lambda: mass_rescan.rescan(space, likelihood, models.lens_light_centre(medians)),
+        lambda: mass_rescan.rescan(
+            space,
+            likelihood,
+            models.lens_light_centre(medians),
+            lambda values: len(images(values).positions) > 1,
+        ),
     )
     if not found.moved:
         return problem
-    recentred = mass_rescan.recentred_space(space, found)
     positions = problem.positions
     if positions is not None:
-        result = fit(problem.dataset, problem.model.build({**medians, **found.values}))
-        brightest = result.source.mesh.points[np.argmax(result.source.fluxes)]
-        positions = positions_of(result, tuple(brightest), settings)
+        positions = images(found.values)
         logger.info("positions penalty from the rescan's mass: %s", positions.describe())
     return dataclasses.replace(
-        problem, space=recentred, reference=found.values, positions=positions
+        problem,
+        space=mass_rescan.recentred_space(space, found),
+        reference=found.values,
+        positions=positions,
     )
 
 
