@@ -599,6 +599,7 @@ slam:
   profile: quick
   allow_unconverged: true
   sp_start: prior
+  spix1_rescan: false
   source_pixels: 120
   overlay_shape: [12, 12]
   samplers:
@@ -610,8 +611,10 @@ slam:
 """
 """A one-lens sample with every sampler capped (MASS is the quick profile's nautilus): the
 DAG's plumbing, not a lens model, so each phase builds on unconverged earlier phases. SP
-samples the anchor's priors: the quick profile's start search (9,440 likelihood calls,
-80 s of this test) has its own tests in test_sp_start.py."""
+samples the anchor's priors and SPix1 does not rescan SP's mass: the quick profile's start
+search (9,440 likelihood calls, 80 s of this test) and the rescan (which moves this
+unconverged SP's mass: 3,121 calls, 93 s) have their own tests in test_sp_start.py,
+test_mass_rescan.py and test_pipeline.py."""
 
 
 @pytest.mark.slow
