@@ -29,20 +29,9 @@ def pytest_addoption(parser):
     )
 
 
-LONGEST_FILES = ("test_workflow.py", "test_smoothness.py", "test_pipeline.py", "test_sp_start.py")
-"""Test files of 100–500 s each (`--durations`), collected first. With `--dist loadfile
---no-loadscope-reorder` (pyproject.toml) the two workers take whole files in collection
-order, so these start at once, one per worker, and the short files fill in after them;
-ordered by test count instead, test_smoothness.py (nine tests, 360 s) started late and
-ran alone at the end."""
-
-
 def pytest_collection_modifyitems(config, items):
-    """Collect :data:`LONGEST_FILES` first, in that order (a stable sort: the tests of a
-    file keep theirs). Skip the ``recovery`` tests unless ``--recovery`` is given (they
-    exceed the suite's 15-minute budget; README "Run it")."""
-    rank = {name: k for k, name in enumerate(LONGEST_FILES)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(LONGEST_FILES)))
+    """Skip the ``recovery`` tests unless ``--recovery`` is given (they exceed the suite's
+    15-minute budget; README "Run it")."""
     if config.getoption("--recovery"):
         return
     skip = pytest.mark.skip(reason="full-chain recovery: run with --recovery -m recovery")
