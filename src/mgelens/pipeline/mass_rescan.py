@@ -174,7 +174,12 @@ def rescan(
     reference = _with_best_coefficient(posterior, space.prior_transform(np.full(space.n_free, 0.5)))
     theta = space.free_names.index("mass.einstein_radius")
     radii, values = _scan(posterior, reference)
-    near = np.abs(radii / reference[theta] - 1.0) <= NEAR
+
+    def in_sp_basin(radius):
+        """Whether θ_E ``radius`` (arcsec; scalar or array) lies within NEAR of SP's."""
+        return np.abs(radius / reference[theta] - 1.0) <= NEAR
+
+    near = in_sp_basin(radii)
     near_index = int(np.flatnonzero(near)[np.argmax(values[near])])
     far_index = int(np.flatnonzero(~near)[np.argmax(values[~near])])
     near_x, far_x = reference.copy(), reference.copy()
@@ -189,11 +194,13 @@ def rescan(
         points = [_polish(posterior, x, centre) for x in (near_x, far_x)]
         polished = [float(points[0][0][theta]), points[0][1], float(points[1][0][theta]),
                     points[1][1]]  # fmt: skip
-        beyond = [(v, x) for x, v in points if abs(x[theta] / reference[theta] - 1.0) > NEAR]
-        within = [v for x, v in points if abs(x[theta] / reference[theta] - 1.0) <= NEAR]
-        baseline = max(within) if within else near_value
-        if beyond and max(beyond, key=lambda pair: pair[0])[0] >= baseline + THRESHOLD:
-            best = max(beyond, key=lambda pair: pair[0])[1]
+        baseline = max((v for x, v in points if in_sp_basin(x[theta])), default=near_value)
+        value, best = max(
+            ((v, x) for x, v in points if not in_sp_basin(x[theta])),
+            key=lambda pair: pair[0],
+            default=(-np.inf, None),
+        )
+        if value >= baseline + THRESHOLD:
             moved = dict(zip(space.free_names, best.tolist(), strict=True))
             if lensing is not None and not lensing(moved):
                 logger.info("SPix1 rescan: the far basin forms one image of its source")
