@@ -2,6 +2,7 @@
 targets on records with known answers, and the command's files."""
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -15,7 +16,13 @@ from mgelens.coverage import (
     coverage_table,
     target_table,
 )
-from mgelens.plot.coverage import coverage_figure
+from mgelens.plot.coverage import (
+    PULL_LIMIT,
+    coverage_figure,
+    interval_pulls,
+    pull_axis_limit,
+    target_line,
+)
 
 
 def entry(name, truth, median, one, three):
@@ -170,3 +177,46 @@ def test_command_writes_the_tables_and_the_figure(tmp_path):
     assert (out / "coverage.png").stat().st_size > 20_000
     figure = coverage_figure(rows, target_table(rows))
     assert "median chain 10 min" in figure.texts[0].get_text()
+
+
+def test_the_figure_states_each_target_as_a_count_and_fits_its_pulls():
+    """18 of 19 inside 3σ is 94.7 %: the figure says so and marks the 95 % goal missed,
+    where a rounded "95 %" would read as met; the pull axis shrinks to the data but
+    keeps the ±3 lines."""
+    row = SimpleNamespace(target="γ inside 3σ", n=19, fraction=18 / 19, goal=0.95, met=False)
+    assert target_line(row) == "✗ γ inside 3σ: 18 of 19 (94.7%; goal ≥ 95%)"
+    empty = SimpleNamespace(target="γ inside 3σ", n=0, fraction=np.nan, goal=0.95, met=False)
+    assert target_line(empty) == "✗ γ inside 3σ: 0 of 0 (no mocks; goal ≥ 95%)"
+    assert pull_axis_limit(np.array([0.5, -1.2])) == 4.0
+    assert pull_axis_limit(np.array([0.5, -4.4, np.nan])) == pytest.approx(5.2)
+    assert pull_axis_limit(np.array([40.0])) == pytest.approx(PULL_LIMIT + 0.8)
+
+
+def test_interval_pulls_put_the_3sigma_limits_at_three_however_skewed():
+    """Median 1.0; intervals toward the truth: 1σ 0.1 above / 0.02 below, 3σ 0.5 above /
+    0.06 below. A truth 0.05 above sits halfway to the 1σ limit (0.5); 0.3 above, halfway
+    between the 1σ and 3σ limits (2.0); 0.75 above, half a 3σ width beyond (4.5, plotted
+    as −4.5: median below the truth); 0.04 below, halfway from 1σ to 3σ on the short side
+    (+2.0). A Gaussian posterior (σ 0.1) gives the usual pull; a record without 1σ
+    limits takes 3 |d| / s₃."""
+    median, truth = 1.0, np.array([1.05, 1.3, 1.75, 0.96])
+    rows = pd.DataFrame(
+        {
+            "median": median,
+            "truth": truth,
+            "lower_1sigma": 0.98,
+            "upper_1sigma": 1.1,
+            "lower_3sigma": 0.94,
+            "upper_3sigma": 1.5,
+        }
+    )
+    np.testing.assert_allclose(interval_pulls(rows), [-0.5, -2.0, -4.5, 2.0])
+    outside = (truth < 0.94) | (truth > 1.5)
+    np.testing.assert_array_equal(np.abs(interval_pulls(rows)) > 3, outside)
+    gaussian = pd.DataFrame(
+        {"median": [0.0], "truth": [-0.25], "lower_1sigma": [-0.1], "upper_1sigma": [0.1],
+         "lower_3sigma": [-0.3], "upper_3sigma": [0.3]}
+    )  # fmt: skip
+    np.testing.assert_allclose(interval_pulls(gaussian), [2.5])
+    older = gaussian.assign(lower_1sigma=np.nan, upper_1sigma=np.nan)
+    np.testing.assert_allclose(interval_pulls(older), [2.5])
