@@ -111,11 +111,14 @@ def test_targets_pass_and_fail_at_their_thresholds():
     missed = target_table(coverage_rows(bad)).set_index("target")
     assert not missed.loc["γ inside 3σ", "met"]  # 17/20 = 85 %
     assert missed.loc["γ inside 3σ", "fraction"] == pytest.approx(0.85)
+    assert missed.loc["γ inside 3σ", "passed"] == 17
+    assert missed.loc["γ₁ inside 3σ", "passed"] == 20
     assert not missed.loc["|median γ − truth| < 0.05", "met"]  # 85 % < 90 %
     assert not missed.loc["θ_E within 1 %", "met"]  # 90 % < 95 %
     assert missed.loc["γ₁ inside 3σ", "met"]
     empty = target_table(coverage_rows([]))
     assert not empty["met"].any()
+    assert (empty["passed"] == 0).all()
 
 
 def test_records_without_one_sigma_intervals_leave_them_unknown():
@@ -183,9 +186,13 @@ def test_the_figure_states_each_target_as_a_count_and_fits_its_pulls():
     """18 of 19 inside 3σ is 94.7 %: the figure says so and marks the 95 % goal missed,
     where a rounded "95 %" would read as met; the pull axis shrinks to the data but
     keeps the ±3 lines."""
-    row = SimpleNamespace(target="γ inside 3σ", n=19, fraction=18 / 19, goal=0.95, met=False)
+    row = SimpleNamespace(
+        target="γ inside 3σ", n=19, passed=18, fraction=18 / 19, goal=0.95, met=False
+    )
     assert target_line(row) == "✗ γ inside 3σ: 18 of 19 (94.7%; goal ≥ 95%)"
-    empty = SimpleNamespace(target="γ inside 3σ", n=0, fraction=np.nan, goal=0.95, met=False)
+    empty = SimpleNamespace(
+        target="γ inside 3σ", n=0, passed=0, fraction=np.nan, goal=0.95, met=False
+    )
     assert target_line(empty) == "✗ γ inside 3σ: 0 of 0 (no mocks; goal ≥ 95%)"
     assert pull_axis_limit(np.array([0.5, -1.2])) == 4.0
     assert pull_axis_limit(np.array([0.5, -4.4, np.nan])) == pytest.approx(5.2)

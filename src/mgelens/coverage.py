@@ -156,8 +156,9 @@ def coverage_table(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def target_table(rows: pd.DataFrame, targets: Sequence[Target] = TARGETS) -> pd.DataFrame:
-    """Each target's measured fraction, goal and whether it is met (``met`` is False with
-    no mocks). Columns ``target, parameter, n, fraction, goal, met``."""
+    """Each target's count and fraction of mocks that meet it, its goal and whether it is
+    met (``met`` is False with no mocks). Columns ``target, parameter, n, passed,
+    fraction, goal, met``."""
     out = []
     for target in targets:
         part = rows[rows["parameter"] == target.parameter]
@@ -175,6 +176,7 @@ def target_table(rows: pd.DataFrame, targets: Sequence[Target] = TARGETS) -> pd.
                 "target": target.name,
                 "parameter": target.parameter,
                 "n": len(part),
+                "passed": int(passed.sum()),
                 "fraction": fraction,
                 "goal": target.goal,
                 "met": bool(len(part)) and fraction >= target.goal,

@@ -58,10 +58,9 @@ def pull_axis_limit(pulls: np.ndarray) -> float:
 def target_line(row) -> str:
     """One target of :func:`~mgelens.coverage.target_table` as text: the count of mocks
     that pass, not a rounded percentage (18 of 19 is 94.7 %, short of a 95 % goal)."""
-    passed = round(row.fraction * row.n) if row.n else 0
     fraction = f"{row.fraction:.1%}" if row.n else "no mocks"
     return (
-        f"{'✓' if row.met else '✗'} {row.target}: {passed} of {row.n} ({fraction}; "
+        f"{'✓' if row.met else '✗'} {row.target}: {row.passed} of {row.n} ({fraction}; "
         f"goal ≥ {row.goal:.0%})"
     )
 
