@@ -14,12 +14,12 @@ from mgelens.coverage import (
     chain_seconds,
     coverage_rows,
     coverage_table,
+    interval_pulls,
     target_table,
 )
 from mgelens.plot.coverage import (
     PULL_LIMIT,
     coverage_figure,
-    interval_pulls,
     pull_axis_limit,
     target_line,
 )
@@ -211,6 +211,7 @@ def test_interval_pulls_put_the_3sigma_limits_at_three_however_skewed():
         {
             "median": median,
             "truth": truth,
+            "error": median - truth,
             "lower_1sigma": 0.98,
             "upper_1sigma": 1.1,
             "lower_3sigma": 0.94,
@@ -221,8 +222,8 @@ def test_interval_pulls_put_the_3sigma_limits_at_three_however_skewed():
     outside = (truth < 0.94) | (truth > 1.5)
     np.testing.assert_array_equal(np.abs(interval_pulls(rows)) > 3, outside)
     gaussian = pd.DataFrame(
-        {"median": [0.0], "truth": [-0.25], "lower_1sigma": [-0.1], "upper_1sigma": [0.1],
-         "lower_3sigma": [-0.3], "upper_3sigma": [0.3]}
+        {"median": [0.0], "truth": [-0.25], "error": [0.25], "lower_1sigma": [-0.1],
+         "upper_1sigma": [0.1], "lower_3sigma": [-0.3], "upper_3sigma": [0.3]}
     )  # fmt: skip
     np.testing.assert_allclose(interval_pulls(gaussian), [2.5])
     older = gaussian.assign(lower_1sigma=np.nan, upper_1sigma=np.nan)

@@ -87,9 +87,42 @@ TARGETS = (
 )
 
 
+def _toward_truth(error, median, lower, upper):
+    """Distance from the median to the interval limit on the truth's side: the lower limit
+    where the median lies above the truth (``error`` > 0), else the upper (scalars or
+    arrays)."""
+    return np.where(np.asarray(error) > 0, median - lower, upper - median)
+
+
 def _pull(error: float, median: float, lower: float, upper: float) -> float:
-    width = median - lower if error > 0 else upper - median
+    width = float(_toward_truth(error, median, lower, upper))
     return error / width if width > 0 else np.nan
+
+
+def interval_pulls(rows: pd.DataFrame) -> np.ndarray:
+    """``error`` (median − truth, angles wrapped) of each row of :func:`coverage_rows` on
+    the scale of its own intervals, toward the truth: |d| / s₁ up to the 1σ limit (s₁ its
+    distance from the median), then linear from 1 to 3 between the 1σ and 3σ limits, and
+    3 + 3 (|d| − s₃) / s₃ beyond the 3σ limit, with the sign of ``error``. So |value| > 3
+    exactly where the truth lies outside the 3σ interval, and < 1 where it lies inside
+    the 1σ interval, however skewed the posterior; for a Gaussian posterior it is the
+    usual pull. Rows without 1σ limits (older records) take 3 |d| / s₃."""
+    error, median, lower_1, upper_1, lower_3, upper_3 = (
+        rows[name].to_numpy(dtype=float)
+        for name in ("error", "median", "lower_1sigma", "upper_1sigma", "lower_3sigma",
+                     "upper_3sigma")
+    )  # fmt: skip
+    one = _toward_truth(error, median, lower_1, upper_1)
+    three = _toward_truth(error, median, lower_3, upper_3)
+    size = np.abs(error)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scaled = np.where(
+            size <= three,
+            np.where(size <= one, size / one, 1.0 + 2.0 * (size - one) / (three - one)),
+            3.0 + 3.0 * (size - three) / three,
+        )
+        scaled = np.where(np.isfinite(one) & (one > 0), scaled, 3.0 * size / three)
+    return np.sign(error) * scaled
 
 
 def coverage_rows(records: Sequence[Mapping]) -> pd.DataFrame:

@@ -1,13 +1,13 @@
 """Coverage figure (:mod:`mgelens.coverage`): where each mock's truth lies against its
 posterior intervals, per mass parameter, on a scale whose ±1 and ±3 are the 1σ and 3σ
-limits on the truth's side (:func:`interval_pulls`), mocks whose 3σ interval misses the
-truth in red and named, and the targets listed."""
+limits on the truth's side (:func:`~mgelens.coverage.interval_pulls`), mocks whose 3σ
+interval misses the truth in red and named, and the targets listed."""
 
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from mgelens.coverage import PARAMETERS
+from mgelens.coverage import PARAMETERS, interval_pulls
 
 PULL_LIMIT = 10.0
 """Pulls beyond ±this are drawn at the limit (with a triangle) so the bulk stays legible."""
@@ -22,30 +22,6 @@ LABELS = {
     "shear.gamma_1": "γ₁",
     "shear.gamma_2": "γ₂",
 }
-
-
-def interval_pulls(rows: pd.DataFrame) -> np.ndarray:
-    """(median − truth) of each row on the scale of its own intervals, toward the truth:
-    |d| / s₁ up to the 1σ limit (s₁ its distance from the median), then linear from 1 to 3
-    between the 1σ and 3σ limits, and 3 + 3 (|d| − s₃) / s₃ beyond the 3σ limit, with
-    the sign of median − truth. So |value| > 3 exactly where the truth lies outside the
-    3σ interval, and < 1 where it lies inside the 1σ interval, however skewed the
-    posterior; for a Gaussian posterior it is the usual pull. Rows without 1σ limits
-    (older records) take 3 |d| / s₃."""
-    error = rows["median"].to_numpy(dtype=float) - rows["truth"].to_numpy(dtype=float)
-    median = rows["median"].to_numpy(dtype=float)
-    above = error > 0  # the truth lies below the median: the lower limits face it
-    one = np.where(above, median - rows["lower_1sigma"], rows["upper_1sigma"] - median)
-    three = np.where(above, median - rows["lower_3sigma"], rows["upper_3sigma"] - median)
-    one, three, size = one.astype(float), three.astype(float), np.abs(error)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scaled = np.where(
-            size <= three,
-            np.where(size <= one, size / one, 1.0 + 2.0 * (size - one) / (three - one)),
-            3.0 + 3.0 * (size - three) / three,
-        )
-        scaled = np.where(np.isfinite(one) & (one > 0), scaled, 3.0 * size / three)
-    return np.sign(error) * scaled
 
 
 def pull_axis_limit(pulls: np.ndarray) -> float:
@@ -71,10 +47,11 @@ def coverage_figure(rows: pd.DataFrame, targets: pd.DataFrame, title: str = "") 
     figure = Figure(figsize=(11.0, 5.5), layout="constrained")
     ax = figure.add_subplot()
     names = [name for name in PARAMETERS if (rows["parameter"] == name).any()]
+    all_pulls = interval_pulls(rows)
     rng = np.random.default_rng(0)
     for k, name in enumerate(names):
-        part = rows[rows["parameter"] == name]
-        pulls = interval_pulls(part)
+        of_name = (rows["parameter"] == name).to_numpy()
+        part, pulls = rows[of_name], all_pulls[of_name]
         shown = np.clip(pulls, -PULL_LIMIT, PULL_LIMIT)
         x = k + rng.uniform(-0.18, 0.18, len(part))
         missed = ~part["within_3sigma"].astype(bool).to_numpy()
@@ -97,7 +74,7 @@ def coverage_figure(rows: pd.DataFrame, targets: pd.DataFrame, title: str = "") 
     ax.axhline(0.0, color="0.6", linewidth=0.6)
     ax.set_xticks(range(len(names)), [LABELS[name] for name in names])
     ax.set_xlim(-0.6, len(names) - 0.4)
-    limit = pull_axis_limit(interval_pulls(rows))
+    limit = pull_axis_limit(all_pulls)
     ax.set_ylim(-limit, limit)
     ax.set_ylabel(
         "median − truth, in the posterior's intervals\n(±1, ±3: its 1σ, 3σ limits toward the truth)"
