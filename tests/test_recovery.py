@@ -6,6 +6,7 @@ import json
 from types import SimpleNamespace
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from mgelens import mock_lenses
@@ -14,6 +15,7 @@ from mgelens.recovery import (
     TrueLightRefit,
     lens_light_recovery,
     light_split_profile,
+    light_target_table,
     mass_recovery,
     recovery_summary,
     recovery_table,
@@ -159,3 +161,31 @@ def test_light_split_separates_a_trade_between_lens_and_source_from_a_total_erro
 def test_split_annuli_cover_the_mask_beyond_the_centre_in_steps_of_about_0_3_arcsec():
     assert split_annulus_edges(1.8) == pytest.approx([0.2, 0.52, 0.84, 1.16, 1.48, 1.8])
     assert split_annulus_edges(0.3) == pytest.approx([0.2, 0.3])
+
+
+def test_light_targets_count_the_mocks_within_each_tolerance_after_a_csv_round_trip(tmp_path):
+    """Mocks whose fitted light is the truth scaled by 1 + e: the mean error beyond 0.2″ is
+    e, so e = 0.03, −0.07 and 0.12 meet the 10 % target twice and the 5 % target once;
+    the isophote target counts only the mocks that have an isophote comparison."""
+    shape, pixel_scale = (41, 41), 0.05
+    x, y = pixel_centres(shape, pixel_scale)
+    true = np.exp(-np.hypot(x, y) / 0.4)
+    mask = np.hypot(x, y) > 0.9
+    records = []
+    for name, error, isophotes in (("A", 0.03, True), ("B", -0.07, False), ("C", 0.12, None)):
+        light = lens_light_recovery(true, true * (1 + error), mask, pixel_scale, (0.0, 0.0))
+        assert light.mean == pytest.approx(error, rel=1e-12)
+        record = json.loads(json.dumps(recovery_summary(name, [], light)))
+        record["criteria"]["isophotes_within_tolerance"] = isophotes
+        records.append(record)
+    recovery_table(records).to_csv(tmp_path / "recovery.csv", index=False)
+    table = pd.read_csv(tmp_path / "recovery.csv")
+    ten, five, isophotes = (row for _, row in light_target_table(table).iterrows())
+    assert (ten["n"], ten["passed"], ten["met"]) == (3, 2, False)
+    assert ten["fraction"] == pytest.approx(2 / 3)
+    assert (five["n"], five["passed"], five["met"]) == (3, 1, False)
+    assert (isophotes["n"], isophotes["passed"], isophotes["fraction"]) == (2, 1, 0.5)
+    assert not isophotes["met"]
+    within = light_target_table(table[table["lens"] == "A"])
+    assert within["met"].tolist() == [True, True, True]
+    assert light_target_table(table[table["lens"] == "C"])["met"].tolist() == [False, False, False]

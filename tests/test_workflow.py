@@ -671,6 +671,12 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     recovered = pd.read_csv(tmp_path / "results" / "summary" / "recovery.csv")
     assert list(recovered["lens"]) == ["M1"]
     assert recovered["mass.slope.truth"].iloc[0] == pytest.approx(2.1)
+    targets = pd.read_csv(tmp_path / "results" / "summary" / "recovery_targets.csv")
+    light_ten, light_five, isophote_target = (row for _, row in targets.iterrows())
+    mean_error = abs(recovered["lens_light.mean"].iloc[0])
+    assert (light_ten["n"], light_ten["passed"]) == (1, int(mean_error < 0.10))
+    assert (light_five["n"], light_five["passed"]) == (1, int(mean_error < 0.05))
+    assert (isophote_target["n"], isophote_target["passed"]) == (1, 0)  # not all radii compared
     scan = pd.read_csv(tmp_path / "results" / "summary" / "smoothness.csv")
     assert set(zip(scan["scheme"], scan["edge_rule"], strict=True)) == {
         ("natural_neighbour", "anchor"), ("nearest", "anchor"),

@@ -145,7 +145,8 @@ rule recovery_table:
     input:
         recovery_records,
     output:
-        "results/summary/recovery.csv",
+        table="results/summary/recovery.csv",
+        targets="results/summary/recovery_targets.csv",
     log:
         "logs/recovery_table.log",
     benchmark:
@@ -159,7 +160,8 @@ rule recovery_table:
     conda:
         "../envs/mgelens.yaml"
     shell:
-        "mgelens recovery --table {input:q} --out {output:q} > {log:q} 2>&1"
+        "mgelens recovery --table {input:q} --out {output.table:q} "
+        "--out-targets {output.targets:q} > {log:q} 2>&1"
 
 
 rule coverage:

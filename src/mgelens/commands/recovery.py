@@ -22,9 +22,11 @@ about the true light centre (:mod:`mgelens.isophote_recovery`), and
 tables and writes the record as JSON; the exit code is 0 whether or not the criteria
 hold (they are in the JSON under ``criteria``).
 
-``--table`` gathers records into one CSV row per lens instead::
+``--table`` gathers records into one CSV row per lens instead, and ``--out-targets``
+counts the mocks that meet the lens-light targets (``mgelens.recovery.LIGHT_TARGETS``)::
 
-    mgelens recovery --table results/*/recovery.json --out results/summary/recovery.csv
+    mgelens recovery --table results/*/recovery.json --out results/summary/recovery.csv \\
+        --out-targets results/summary/recovery_targets.csv
 """
 
 import argparse
@@ -54,6 +56,7 @@ from mgelens.plot.isophote_recovery import isophote_recovery_figure
 from mgelens.recovery import (
     lens_light_recovery,
     light_split_profile,
+    light_target_table,
     mass_recovery,
     recovery_summary,
     recovery_table,
@@ -92,6 +95,11 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--out", type=Path, required=True, help="recovery record (JSON) or, with --table, CSV"
     )
+    parser.add_argument(
+        "--out-targets",
+        type=Path,
+        help="with --table: the lens-light targets over the records (CSV, light_target_table)",
+    )
     add_threads_argument(parser)
     parser.set_defaults(func=run)
 
@@ -99,7 +107,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     limit_threads(args.threads)
     if args.table:
-        return _gather(args.table, args.out)
+        return _gather(args.table, args.out, args.out_targets)
     if args.lens_dir is None or args.phase is None:
         logger.error("recovery needs --lens-dir and --phase (or --table to gather records)")
         return 1
@@ -202,7 +210,7 @@ def _print_isophotes(result: IsophoteRecovery) -> None:
     )
 
 
-def _gather(paths: list[Path], out: Path) -> int:
+def _gather(paths: list[Path], out: Path, out_targets: Path | None) -> int:
     try:
         records = [json.loads(path.read_text()) for path in paths]
         table = recovery_table(records)
@@ -212,4 +220,9 @@ def _gather(paths: list[Path], out: Path) -> int:
     with atomic_path(out) as temporary:
         table.to_csv(temporary, index=False)
     print(table.to_string(index=False))
+    if out_targets is not None:
+        targets = light_target_table(table)
+        with atomic_path(out_targets) as temporary:
+            targets.to_csv(temporary, index=False)
+        print(targets.to_string(index=False))
     return 0
