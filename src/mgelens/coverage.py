@@ -203,19 +203,24 @@ def target_table(rows: pd.DataFrame, targets: Sequence[Target] = TARGETS) -> pd.
             passed = (part["error"] / part["truth"]).abs() < target.limit
         else:
             raise ValueError(f"unknown target condition {target.condition!r}")
-        fraction = float(passed.mean()) if len(part) else np.nan
         out.append(
-            {
-                "target": target.name,
-                "parameter": target.parameter,
-                "n": len(part),
-                "passed": int(passed.sum()),
-                "fraction": fraction,
-                "goal": target.goal,
-                "met": bool(len(part)) and fraction >= target.goal,
-            }
+            {"target": target.name, "parameter": target.parameter}
+            | target_counts(passed, target.goal)
         )
     return pd.DataFrame(out)
+
+
+def target_counts(passed: pd.Series, goal: float) -> dict:
+    """``n`` (mocks counted), ``passed``, ``fraction`` (NaN with none), ``goal`` and ``met``
+    (fraction ≥ goal; False with no mocks) of one target, from a boolean per mock."""
+    fraction = float(passed.mean()) if len(passed) else np.nan
+    return {
+        "n": len(passed),
+        "passed": int(passed.sum()),
+        "fraction": fraction,
+        "goal": goal,
+        "met": bool(len(passed)) and fraction >= goal,
+    }
 
 
 CHAIN_BENCHMARKS = ("sp", "spix1", "spix2", "light", "mass")

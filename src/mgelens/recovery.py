@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pandas as pd
 
+from mgelens.coverage import target_counts
 from mgelens.fit import FitDataset, LensModel, fit
 from mgelens.grid import pixel_centres
 from mgelens.isophote_recovery import IsophoteRecovery
@@ -385,17 +386,8 @@ def light_target_table(
             passed = values.astype(bool)
         else:
             passed = values.astype(float).abs() < target.limit
-        fraction = float(passed.mean()) if len(passed) else np.nan
         rows.append(
-            {
-                "target": target.name,
-                "column": target.column,
-                "n": len(passed),
-                "passed": int(passed.sum()),
-                "fraction": fraction,
-                "goal": target.goal,
-                "met": bool(len(passed)) and fraction >= target.goal,
-            }
+            {"target": target.name, "column": target.column} | target_counts(passed, target.goal)
         )
     return pd.DataFrame(rows)
 
