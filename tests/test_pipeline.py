@@ -920,7 +920,8 @@ def test_isophotes_of_a_phase_take_the_imaging_pixel_scale(sp_run, mock_dir, tmp
 
 # -- the 3×Sérsic chain -------------------------------------------------------------------
 def sersic_settings(positive_only=False, **changes):
-    """The 3×Sérsic chain, capped, every linear unknown free unless ``positive_only``."""
+    """The 3×Sérsic chain, capped, every linear unknown free unless ``positive_only``; the
+    paper's source support (``mask``) unless ``changes`` sets another."""
     capped = {"progress_every": 1e9, "n_live": 12}
     iterations = {"sp": 60, "spix1": 20, "spix2": 15, "light": 20, "mass": 20}
     return settings_from_mapping(
@@ -930,6 +931,7 @@ def sersic_settings(positive_only=False, **changes):
             "source_pixels": 60,
             "overlay_shape": [8, 8],
             "allow_unconverged": True,
+            "source_support": "mask",
             "samplers": {
                 p: {**capped, "method": "dynesty_static", "max_iterations": n}
                 for p, n in iterations.items()

@@ -802,8 +802,9 @@ def test_chain_lens_light_scores_at_least_as_well_as_the_true_one(chain_recovery
     "and MGE priors tried, each with its strength chosen by the evidence, brings all three "
     "within 10 % (docs/recovery.md, 'Candidates for identifying the split'). The arcs' "
     "source support (slam.source_support: arcs) takes population mock P04 from -57 % to "
-    "-0.1 % and P02 from -37 % to +9 %, but M1 stays at +21 % and M2 goes to +10.5 % "
-    "(docs/recovery.md, 'The source's support')",
+    "-0.1 % and P02 from -37 % to +9 %, and is the quick profile's default since it brought "
+    "P05-P07 within 3 %, but on M1-M3 it gives +32 %, +24 % and -19 % (docs/recovery.md, "
+    "'The support becomes the quick profile's default')",
 )
 def test_chain_recovers_the_lens_light_within_5_percent(chain_recovery):
     assert chain_recovery["criteria"]["lens_light_within_5_percent"] is True

@@ -104,7 +104,8 @@ class SlamSettings:
         ``mesh.arc_threshold`` of its peak, a hyper-parameter SPix2 samples with the
         regularization and passes on (``arcs``, :mod:`mgelens.source.support`). Outside the
         ring the image plane is singly imaged, and there the paper's source copies the
-        lens light's outer wings (docs/recovery.md, "The source's support").
+        lens light's outer wings (docs/recovery.md, "The source's support"). The quick
+        profile's default is ``arcs``, the paper profile's ``mask``.
     overlay_shape : (int, int)
         (n_y, n_x) of the SPix1 overlay grid (paper 34×34).
     spix1_regularization : {"constant", "constant_split"}
@@ -437,6 +438,7 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
             adaptive_signals="weighted",
             sp_start="search",
             spix1_rescan=True,
+            source_support="arcs",
             mass_meshes=2,
             source_pixels=500,
             overlay_shape=(24, 24),
