@@ -381,7 +381,7 @@ def light_target_table(
     Columns ``target, column, n, passed, fraction, goal, met``."""
     rows = []
     for target in targets:
-        values = table[target.column].dropna() if target.column in table else pd.Series()
+        values = table[target.column].dropna()
         if target.limit is None:
             passed = values.astype(bool)
         else:
