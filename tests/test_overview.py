@@ -4,6 +4,7 @@ end on a capped SP → SPix1 run of a small mock with contaminants."""
 
 import io
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -30,6 +31,7 @@ from mgelens.overview import (
     contaminant_pixels,
     critical_lines,
     light_component,
+    off_support_cells,
     overview_from_fit,
     source_window,
     voronoi_edges,
@@ -284,6 +286,36 @@ def test_a_zoomed_source_image_samples_the_same_source(capped_run, mock_dir, pha
     )
 
 
+def test_off_support_cells_are_the_nearest_mesh_points_off_the_support():
+    """Every grid point takes the support flag of its Voronoi cell: checked against the
+    brute-force nearest mesh point."""
+    rng = np.random.default_rng(4)
+    mesh = VoronoiMesh.from_points(*rng.uniform(-1.0, 1.0, (60, 2)).T)
+    support = rng.random(60) < 0.5
+    off = off_support_cells((41, 37), 0.05, (0.1, -0.05), mesh, support)
+    x, y = pixel_centres((41, 37), 0.05, (0.1, -0.05))
+    distance = np.hypot(x[..., None] - mesh.points[:, 0], y[..., None] - mesh.points[:, 1])
+    np.testing.assert_array_equal(off, ~support[np.argmin(distance, axis=-1)])
+    assert 0 < off.sum() < off.size
+
+
+def test_cells_off_the_support_are_veiled_and_named_in_the_legend():
+    blob = synthetic_overview().source.image
+    off = np.zeros(blob.shape, dtype=bool)
+    off[:, :5] = True
+    veiled = synthetic_overview(
+        source=SourcePlane(blob, image_extent(blob.shape, PIXEL), None, off)
+    )
+    ax = panel(overview_figure(veiled), "source")
+    (layer,) = [im for im in ax.get_images() if im.get_gid() == "off_support"]
+    np.testing.assert_array_equal(~np.ma.getmaskarray(layer.get_array()), off)
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [
+        "held at zero (off the arcs' support)"
+    ]
+    plain = panel(overview_figure(synthetic_overview()), "source")
+    assert [im.get_gid() for im in plain.get_images()] == [None]
+
+
 # -- end to end on a capped SP -> SPix1 run ---------------------------------------------
 @pytest.fixture(scope="module")
 def mock_dir(tmp_path_factory):
@@ -367,6 +399,35 @@ def test_overview_command_on_a_pixelized_phase(capped_run, mock_dir, tmp_path):
     assert main([*arguments, "--out", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert [p.name for p in out.parent.iterdir()] == ["overview.png"]  # no temporary left
+
+
+def test_an_arcs_support_veils_the_unsolved_cells_of_the_overview(capped_run, mock_dir):
+    """SPix1's fit again with the source solved only where its three brightest lensed pixels
+    reach: the veiled grid points are those whose cell the fit held at zero."""
+    fitted, _ = rebuilt(capped_run, "spix1", mock_dir)
+    lensed = fitted.lensed_source_image
+    arcs = lensed >= np.sort(lensed)[-3]  # its three brightest pixels
+    model = replace(fitted.model, source=replace(fitted.model.source, arc_pixels=arcs))
+    supported = fit(fitted.dataset, model)
+    support = supported.source.support
+    assert 0 < support.sum() < support.size
+    problem, _ = run.max_likelihood_problem(
+        PhaseResult.read(capped_run / "spix1"), mock_dir, capped_run
+    )
+    names = [spec.name for spec in problem.model.lens_light]
+    overview = overview_from_fit(supported, names, MASK_RADIUS)
+    source = overview.source
+    inside = np.isfinite(source.image)
+    assert source.off_support[inside].any()
+    assert (~source.off_support[inside]).any()
+    x_min, x_max, y_min, y_max = source.extent
+    pixel = (x_max - x_min) / source.image.shape[1]
+    x, y = pixel_centres(source.image.shape, pixel, (0.5 * (x_min + x_max), 0.5 * (y_min + y_max)))
+    points = supported.source.mesh.points
+    nearest = np.argmin(np.hypot(x[..., None] - points[:, 0], y[..., None] - points[:, 1]), -1)
+    fluxes = supported.source.fluxes
+    assert np.all(fluxes[nearest[inside & source.off_support]] == 0.0)  # held at zero
+    assert np.all(support[nearest[inside & ~source.off_support]])
 
 
 def test_bad_phase_gives_a_one_line_error(mock_dir, capped_run, tmp_path, caplog):

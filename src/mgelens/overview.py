@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from mgelens.fit import FitResult
 from mgelens.geometry import axis_ratio_and_angle_from
@@ -71,12 +72,16 @@ class SourcePlane:
 
     ``extent`` = (x_min, x_max, y_min, y_max) arcsec of the grid's outer pixel edges;
     ``mesh_edges`` (n, 2, 2) holds the finite Voronoi cell edges [(x, y), (x, y)] of a
-    pixelized source, ``None`` for an MGE source.
+    pixelized source, ``None`` for an MGE source. ``off_support`` (bool, the shape of
+    ``image``) marks the grid points in the Voronoi cells of mesh points held at zero off
+    the source's support (:mod:`mgelens.source.support`); ``None`` for a source solved on
+    its whole mesh.
     """
 
     image: np.ndarray
     extent: tuple[float, float, float, float]
     mesh_edges: np.ndarray | None = None
+    off_support: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,6 +169,21 @@ def outside_hull_blank(
     x, y = pixel_centres(image.shape, pixel_scale, centre)
     outside = mesh.delaunay.find_simplex(np.column_stack([x.ravel(), y.ravel()])) < 0
     return np.where(outside.reshape(image.shape), np.nan, image)
+
+
+def off_support_cells(
+    shape: tuple[int, int],
+    pixel_scale: float,
+    centre: tuple[float, float],
+    mesh: VoronoiMesh,
+    support: np.ndarray,
+) -> np.ndarray:
+    """Bool ``shape``: the points of a source-plane grid (``pixel_scale`` about ``centre``)
+    whose Voronoi cell, the cell of their nearest mesh point, belongs to a mesh point off
+    ``support`` (bool over the mesh points), whose flux the fit held at zero."""
+    x, y = pixel_centres(shape, pixel_scale, centre)
+    _, nearest = cKDTree(mesh.points).query(np.column_stack([x.ravel(), y.ravel()]))
+    return ~np.asarray(support, dtype=bool)[nearest].reshape(shape)
 
 
 def _component_label(name: str) -> str:
@@ -313,10 +333,15 @@ def overview_from_fit(
     if window is not None:
         image, source_pixel, centre = source_plane_image(result, window=window)
     extent = _grid_extent(image, source_pixel, centre)
-    mesh_edges = None
+    mesh_edges = off_support = None
     if result.source is not None:
-        mesh_edges = voronoi_edges(result.source.mesh)
-        image = outside_hull_blank(image, source_pixel, centre, result.source.mesh)
+        mesh = result.source.mesh
+        mesh_edges = voronoi_edges(mesh)
+        image = outside_hull_blank(image, source_pixel, centre, mesh)
+        if result.source.support is not None:
+            off_support = off_support_cells(
+                image.shape, source_pixel, centre, mesh, result.source.support
+            )
     merit = "ln ε" if result.source is not None else "ln L"
     title = (
         f"{lens} · {phase}: {merit} = {result.log_evidence:.2f}, "
@@ -338,7 +363,7 @@ def overview_from_fit(
         contaminants=contaminants,
         mask_centre=(float(mask_centre[0]), float(mask_centre[1])),
         mask_radius=float(mask_radius),
-        source=SourcePlane(image, extent, mesh_edges),
+        source=SourcePlane(image, extent, mesh_edges, off_support),
         critical_curve=curve,
         caustic=caustic_line,
         components=light_components(result, component_names),

@@ -10,7 +10,8 @@ file reading):
 2. **lens light ⊗ PSF** — the lens-light model, same asinh stretch as the data.
 3. **source plane** — the reconstruction (linear scale; blank outside the mesh) with the
    Voronoi cell edges of a pixelized source (none for the SP phase's MGE source) and the
-   tangential caustic.
+   tangential caustic; the cells held at zero off the source's support (``source_support:
+   arcs``) under a grey veil.
 4. **normalised residuals** (data − model)/σ — diverging map fixed at ±3.5 σ,
    contaminants grey as in panel 1.
 5. **lens-light contours** — log-spaced isophote levels of the lens-light model, each MGE
@@ -49,6 +50,8 @@ CONTOUR_RANGE = 1e-4
 MARGIN = 1.08
 """Image-plane panels show ±MARGIN × the fit radius about the fit circle's centre."""
 CONTAMINANT_COLOUR = "0.55"
+OFF_SUPPORT_ALPHA = 0.6
+"""Opacity of the grey veil over the source cells held at zero off the support."""
 CRITICAL_COLOUR = "cyan"
 COMPONENT_COLOURS = ("tab:red", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink")
 
@@ -178,7 +181,30 @@ def _source_panel(ax: Axes, figure: Figure, overview: Overview, label: str) -> N
         ax.add_collection(
             LineCollection(source.mesh_edges, colors="white", linewidths=0.25, alpha=0.5)
         )
+    off_support = source.off_support
+    veiled = off_support is not None and bool(np.any(off_support & np.isfinite(source.image)))
+    if veiled:
+        layer = np.ma.masked_array(
+            np.ones(off_support.shape), ~(off_support & np.isfinite(source.image))
+        )
+        ax.imshow(
+            layer,
+            origin="lower",
+            extent=source.extent,
+            cmap=colors.ListedColormap([CONTAMINANT_COLOUR]),
+            alpha=OFF_SUPPORT_ALPHA,
+            interpolation="nearest",
+            gid="off_support",
+        )
     _curve(ax, overview.caustic, "caustic")
+    if veiled:
+        handles, _ = ax.get_legend_handles_labels()
+        veil = Patch(
+            color=CONTAMINANT_COLOUR,
+            alpha=OFF_SUPPORT_ALPHA,
+            label="held at zero (off the arcs' support)",
+        )
+        ax.legend(handles=[*handles, veil], loc="upper right", fontsize="x-small", framealpha=0.6)
     ax.set_xlim(source.extent[0], source.extent[1])
     ax.set_ylim(source.extent[2], source.extent[3])
 
