@@ -6,7 +6,8 @@ Two masks at 0.05″: M1's 1.8″ (4,053 pixel centres) and a real SLACS cutout'
 iterations, one thread. Prints the median wall time of ``kmeans_centres`` for 500 and
 1,500 centres, and, from the same seeds, of its two steps (the compiled k-means++ seeding
 and Lloyd iterations) and of scikit-learn's Lloyd iterations, with the weighted inertia of
-both results.
+both results; then the same for the systematic seeding along a Hilbert curve
+(``seeding="systematic"``: its seeding step, the whole call and its inertia).
 
 Run from the repository root: ``python benchmarks/bench_kmeans.py``.
 """
@@ -26,6 +27,7 @@ from mgelens.source.image_mesh import (
     _lloyd,
     kmeans_centres,
     kmeans_weights,
+    systematic_seeding,
 )
 
 
@@ -70,6 +72,18 @@ def bench_mask(shape: tuple[int, int], radius: float) -> None:
         report(
             f"{tag}_inertia_{n}_scikit_learn",
             weighted_inertia(points, weights, theirs),
+            "arcsec^2",
+        )
+        systematic = partial(kmeans_centres, x, y, weights, n, seeding="systematic")
+        report(f"{tag}_kmeans_{n}_systematic_s", median_time(systematic))
+        report(
+            f"{tag}_seeding_{n}_systematic_s",
+            median_time(partial(systematic_seeding, points, weights, n, 0)),
+        )
+        centres = np.column_stack(systematic())
+        report(
+            f"{tag}_inertia_{n}_systematic",
+            weighted_inertia(points, weights, centres),
             "arcsec^2",
         )
 

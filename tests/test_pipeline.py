@@ -40,7 +40,7 @@ from mgelens.pipeline.settings import (
 from mgelens.recovery import true_light_refit
 from mgelens.search.priors import LogUniform, TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult
-from mgelens.source.image_mesh import overlay_centres
+from mgelens.source.image_mesh import kmeans_centres, kmeans_weights, overlay_centres
 from mgelens.source_share import source_share
 
 PIXEL = 0.1
@@ -227,6 +227,14 @@ def test_arcs_support_adds_spix2s_arc_threshold_and_later_phases_keep_it(chain):
         else:
             assert np.array_equal(source.arc_pixels, expected)
         assert kmeans.describe()["source_support"] == support
+    for seeding in ("kmeans++", "systematic"):
+        kmeans = models.KMeansSourceModel(x.ravel(), y.ravel(), adapt, 40, seeding=seeding)
+        expected = kmeans_centres(
+            x.ravel(), y.ravel(), kmeans_weights(adapt, 0.1, 2.0), 40, seeding=seeding
+        )
+        centres = kmeans.centres({"mesh.weight_floor": 0.1, "mesh.weight_power": 2.0})
+        assert all(np.array_equal(a, b) for a, b in zip(centres, expected, strict=True))
+        assert kmeans.describe()["kmeans_seeding"] == seeding
     held = models.KMeansSourceModel(x.ravel(), y.ravel(), adapt, 40, support="arcs").fixed(
         {**spix2.max_likelihood, models.ARC_THRESHOLD: 0.05}
     )
@@ -536,6 +544,7 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"source_pixels": "many"}, r"slam\.source_pixels must be an integer >= 3, got 'many'"),
         ({"mass_source_pixels": 2}, r"slam\.mass_source_pixels must be an integer >= 3, got 2"),
         ({"source_support": "ring"}, r"slam\.source_support must be one of \['mask', 'arcs'\]"),
+        ({"kmeans_seeding": "random"}, r"slam\.kmeans_seeding must be one of \['kmeans\+\+', "),
         ({"overlay_shape": [24]}, r"slam\.overlay_shape must be two integers >= 2"),
         ({"fit": {"psf_trim": 1}}, r"slam\.fit\.psf_trim must be a number in \[0, 1\), got 1"),
         ({"allow_unconverged": "yes"}, r"slam\.allow_unconverged must be true or false"),

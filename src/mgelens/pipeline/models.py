@@ -450,14 +450,15 @@ class KMeansSourceModel:
     offset: str = "anchor"
     signals: str = "anchor"
     support: str = "mask"
+    seeding: str = "kmeans++"
 
     @classmethod
     def from_settings(
         cls, pixel_x: np.ndarray, pixel_y: np.ndarray, adapt_image: np.ndarray, settings
     ) -> "KMeansSourceModel":
         """The k-means source of the phases on these pixels and adapt image, with the
-        pixel count, seed, scheme, interpolation, cross offset, adaptive signals and
-        support of ``settings`` (:class:`~mgelens.pipeline.settings.SlamSettings`)."""
+        pixel count, seed, scheme, interpolation, cross offset, adaptive signals, support
+        and seeding of ``settings`` (:class:`~mgelens.pipeline.settings.SlamSettings`)."""
         return cls(
             pixel_x,
             pixel_y,
@@ -469,6 +470,7 @@ class KMeansSourceModel:
             settings.cross_offset,
             settings.adaptive_signals,
             settings.source_support,
+            settings.kmeans_seeding,
         )
 
     def centres(self, values: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -479,7 +481,9 @@ class KMeansSourceModel:
         )
         if not (np.all(np.isfinite(weights)) and weights.sum() > 0):
             raise UnphysicalSample("k-means weights are not finite and positive")
-        return kmeans_centres(self.pixel_x, self.pixel_y, weights, self.n_pixels, self.seed)
+        return kmeans_centres(
+            self.pixel_x, self.pixel_y, weights, self.n_pixels, self.seed, seeding=self.seeding
+        )
 
     def mesh_model(self, values: Mapping[str, float]) -> MeshSourceModel:
         """The k-means mesh of ``values`` with the adaptive split regularization."""
@@ -520,6 +524,7 @@ class KMeansSourceModel:
             "cross_offset": self.offset,
             "adaptive_signals": self.signals,
             "source_support": self.support,
+            "kmeans_seeding": self.seeding,
         }
 
 

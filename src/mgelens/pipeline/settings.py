@@ -45,6 +45,7 @@ import yaml
 from mgelens import values
 from mgelens.fit_settings import FitSettings
 from mgelens.search.sampler_settings import SamplerSettings
+from mgelens.source.image_mesh import KMEANS_SEEDINGS
 from mgelens.source.schemes import INTERPOLATIONS, SIGNAL_AVERAGES
 
 PHASES = ("sp", "spix1", "spix2", "light", "mass")
@@ -114,6 +115,11 @@ class SlamSettings:
         k-means weight formula (SPEC §4.1; 2023 = paper era).
     kmeans_seed : int
         Fixed seed of the k-means mesh (SPEC §4.1).
+    kmeans_seeding : {"kmeans++", "systematic"}
+        Initial centres of the k-means mesh (:func:`mgelens.source.image_mesh.kmeans_centres`):
+        the anchor's k-means++ (paper), or a systematic draw along a Hilbert curve, whose
+        mesh, and with it SPix2's ln ε, changes smoothly with the k-means weights instead
+        of jumping by tens in ln ε when they change by a part in 10⁴.
     mass_meshes : int
         Source-mesh realisations of the MASS phase (k-means seeds ``kmeans_seed`` onwards,
         SPix2's hyper-parameters in each): one nested-sampling run per mesh, the
@@ -194,6 +200,7 @@ class SlamSettings:
     spix1_regularization: str = "constant"
     kmeans_scheme: str = "2023"
     kmeans_seed: int = 0
+    kmeans_seeding: str = "kmeans++"
     mass_meshes: int = 1
     interpolation: str = "natural_neighbour"
     cross_offset: str = "anchor"
@@ -281,6 +288,7 @@ _CHOICES = {
     "sp_start": SP_STARTS,
     "sp_mass_centre": SP_MASS_CENTRES,
     "source_support": SOURCE_SUPPORTS,
+    "kmeans_seeding": KMEANS_SEEDINGS,
 }
 """Fields taking one of a few strings."""
 _INTEGERS = {
