@@ -45,8 +45,7 @@ import yaml
 from mgelens import values
 from mgelens.fit_settings import FitSettings
 from mgelens.search.sampler_settings import SamplerSettings
-from mgelens.source.image_mesh import KMEANS_SEEDINGS
-from mgelens.source.schemes import INTERPOLATIONS, SIGNAL_AVERAGES
+from mgelens.source.schemes import INTERPOLATIONS, KMEANS_SEEDINGS, SIGNAL_AVERAGES
 
 PHASES = ("sp", "spix1", "spix2", "light", "mass")
 """Phase names in chain order; each is also the name of the phase's result folder."""

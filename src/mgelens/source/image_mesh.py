@@ -16,6 +16,7 @@ import numpy as np
 
 from mgelens._jit import njit
 from mgelens.grid import pixel_centres
+from mgelens.source.schemes import KMEANS_SEEDINGS
 
 ADAPT_MINIMUM_FRACTION = 0.01
 
@@ -91,11 +92,6 @@ LLOYD_CENTRES_PER_CELL = 2.0
 KMEANS_TOLERANCE = 1e-4
 """Lloyd stops once the centres' total squared shift is at most this fraction of the mean
 variance of the point coordinates (scikit-learn's ``tol`` default and definition)."""
-
-
-KMEANS_SEEDINGS = ("kmeans++", "systematic")
-"""Initial centres of :func:`kmeans_centres`: the anchor's k-means++ or the systematic
-(stratified) draw along a Hilbert curve."""
 
 
 def kmeans_centres(

@@ -12,3 +12,7 @@ the hull) or the continuous one (:attr:`mgelens.source.mesh.VoronoiMesh.ringed`)
 SIGNAL_AVERAGES = ("anchor", "weighted")
 """How a source pixel's signal averages the adapt image over the sub-pixels it serves
 (:func:`mgelens.source.regularization.adaptive_pixel_signals`)."""
+
+KMEANS_SEEDINGS = ("kmeans++", "systematic")
+"""Initial centres of the k-means source mesh: the anchor's k-means++ or the systematic
+(stratified) draw along a Hilbert curve (:func:`mgelens.source.image_mesh.kmeans_centres`)."""
