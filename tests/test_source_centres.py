@@ -109,7 +109,7 @@ def test_hilbert_index_walks_every_cell_once_in_edge_sharing_steps(order):
     assert np.all(np.abs(np.diff(path, axis=0)).sum(axis=1) == 1)
     assert tuple(path[0]) == (0, 0)
     assert tuple(path[-1]) == (side - 1, 0)
-    # every aligned quadrant (and sub-quadrant) is one stretch of the curve
+    # the lower-left quadrant is the first stretch of the curve
     quadrant = distance // (side * side // 4)
     assert np.array_equal(np.unique(quadrant[(ix < side // 2) & (iy < side // 2)]), [0])
 

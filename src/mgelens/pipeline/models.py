@@ -25,6 +25,7 @@ maximum-likelihood values), so a result file describes its whole model.
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 from scipy import optimize
@@ -37,7 +38,7 @@ from mgelens.search.model import Parameter
 from mgelens.search.priors import Gaussian, LogUniform, Prior, TruncatedGaussian, Uniform
 from mgelens.search.results import PhaseResult
 from mgelens.source import support
-from mgelens.source.image_mesh import kmeans_centres, kmeans_weights
+from mgelens.source.image_mesh import hilbert_order, kmeans_centres, kmeans_weights
 from mgelens.source.regularization import AdaptiveBrightnessSplit, Constant, ConstantSplit
 
 LENS_LIGHT, MASS, SHEAR, SOURCE = "lens_light", "mass", "shear", "source"
@@ -482,8 +483,22 @@ class KMeansSourceModel:
         if not (np.all(np.isfinite(weights)) and weights.sum() > 0):
             raise UnphysicalSample("k-means weights are not finite and positive")
         return kmeans_centres(
-            self.pixel_x, self.pixel_y, weights, self.n_pixels, self.seed, seeding=self.seeding
+            self.pixel_x,
+            self.pixel_y,
+            weights,
+            self.n_pixels,
+            self.seed,
+            seeding=self.seeding,
+            curve_order=self._curve_order,
         )
+
+    @cached_property
+    def _curve_order(self) -> np.ndarray | None:
+        """Hilbert order of the pixel centres for the systematic seeding, once per model
+        (None for k-means++): the points are the same at every SPix2 call."""
+        if self.seeding != "systematic":
+            return None
+        return hilbert_order(np.column_stack([self.pixel_x, self.pixel_y]))
 
     def mesh_model(self, values: Mapping[str, float]) -> MeshSourceModel:
         """The k-means mesh of ``values`` with the adaptive split regularization."""

@@ -102,6 +102,7 @@ def kmeans_centres(
     seed: int = 0,
     max_iter: int = 5,
     seeding: str = "kmeans++",
+    curve_order: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Weighted k-means centres of the pixel centres (x, y), arcsec (SPEC §4.1).
 
@@ -123,7 +124,9 @@ def kmeans_centres(
     (:func:`systematic_seeding`): the points in Hilbert-curve order, the k starting centres
     at equal steps of the cumulative √weight, the steps' offset drawn from ``seed``. A
     small change of the weights moves a few starting centres by a pixel or so, and the
-    mesh follows them smoothly (docs/slam.md, "k-means seeding").
+    mesh follows them smoothly (docs/slam.md, "k-means seeding"). ``curve_order`` is
+    :func:`hilbert_order` of the points, computed here when not given (a caller that
+    clusters the same points many times passes it once computed).
 
     Raises
     ------
@@ -141,7 +144,7 @@ def kmeans_centres(
         raise ValueError("k-means weights must be finite, non-negative and not all zero")
     points = np.column_stack([x, y]).astype(float)
     if seeding == "systematic":
-        initial = points[systematic_seeding(points, weights, n_pixels, seed)]
+        initial = points[systematic_seeding(points, weights, n_pixels, seed, curve_order)]
     elif seeding == "kmeans++":
         trials = 2 + int(np.log(n_pixels))
         uniforms = np.random.default_rng(seed).random(1 + (n_pixels - 1) * trials)
@@ -188,10 +191,17 @@ def hilbert_order(points: np.ndarray) -> np.ndarray:
     return np.argsort(hilbert_index(cells[:, 0], cells[:, 1], HILBERT_ORDER), kind="stable")
 
 
-def systematic_seeding(points: np.ndarray, weights: np.ndarray, k: int, seed: int) -> np.ndarray:
+def systematic_seeding(
+    points: np.ndarray,
+    weights: np.ndarray,
+    k: int,
+    seed: int,
+    curve_order: np.ndarray | None = None,
+) -> np.ndarray:
     """Indices of k distinct points (n, 2) drawn systematically ∝ √``weights``.
 
-    Along the Hilbert order of the points (:func:`hilbert_order`), centre j is the point
+    Along the Hilbert order of the points (``curve_order``, :func:`hilbert_order` of
+    ``points`` when not given), centre j is the point
     where the cumulative √weight first reaches (j + u)/k of the total, with one offset u
     in [0, 1) from ``numpy.random.default_rng(seed)``. The curve keeps near points near
     in the order, so every stretch of the image gets centres in proportion to its
@@ -202,7 +212,7 @@ def systematic_seeding(points: np.ndarray, weights: np.ndarray, k: int, seed: in
     60 % above k-means++'s on a 3″ mask (benchmarks/bench_kmeans.py). A point picked
     twice passes the later pick on to the next points along the curve.
     """
-    order = hilbert_order(points)
+    order = hilbert_order(points) if curve_order is None else curve_order
     cumulative = np.cumsum(np.sqrt(weights[order]))
     offset = np.random.default_rng(seed).random()
     targets = (np.arange(k) + offset) / k * cumulative[-1]
