@@ -111,6 +111,7 @@ def nominal_values(centre, einstein_radius: float, mge_sets: int) -> dict[str, f
         "regularization.signal_scale": 0.5,
         "mesh.weight_floor": 0.1,
         "mesh.weight_power": 2.0,
+        "mesh.arc_threshold": 0.02,
         "lens_light.point.centre_x": centre[0],
         "lens_light.point.centre_y": centre[1],
         "lens_light.point.ell_comps_1": 0.0,
@@ -187,7 +188,7 @@ def phase_calls(lens_dir: Path, settings, lens, einstein_radius: float, n_calls:
         dataset_copy = replace(dataset, _columns_cache={}, _source_cache={})
         passive = None
         if model.stable_unknowns and settings.fit.positive_only:
-            passive = ~fit(dataset_copy, model.build(base)).solution.active_zero
+            passive = fit(dataset_copy, model.build(base)).passive_set
         draws = [jittered(base, phase, rng) for _ in range(n_calls)]
         calls[phase] = (dataset_copy, model, draws, passive)
     return calls, dataset, centre
