@@ -45,4 +45,5 @@ def test_bench_phases_times_every_phase_of_a_real_lens(slacs_dir):
     assert set(figures) == set(PHASES)
     assert all(float(ms) > 0 for ms in figures.values())
     stages = re.findall(r"^stage_ms_spix2_kmeans: ([0-9.]+)$", run.stdout, flags=re.MULTILINE)
-    assert len(stages) == 1 and float(stages[0]) > 0
+    assert len(stages) == 1
+    assert float(stages[0]) > 0
