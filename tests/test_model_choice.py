@@ -3,6 +3,7 @@ the sample sheet's per-lens pixel scale."""
 
 import dataclasses
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ from test_pipeline import LENS, mock_dir  # noqa: F401  (fixture)
 
 from mgelens.cli import main
 from mgelens.imaging_input import ImagingError
-from mgelens.pipeline import problem, run
+from mgelens.pipeline import light_bound, problem, run
 from mgelens.pipeline.model_choice import (
     Candidate,
     LightModel,
@@ -191,6 +192,64 @@ def test_choose_command_names_a_missing_candidate(candidate_run, tmp_path, caplo
     assert "light_x6_point/result.json not found" in caplog.text
     assert "mgelens phase light --folder light_x6_point" in caplog.text
     assert not (tmp_path / "choice.json").exists()
+
+
+def _reference_with_evidence(results, folder, log_evidence):
+    """A copy of the X2+point candidate in ``folder`` whose ln Z reads ``log_evidence``, as
+    a converged run's (the capped samplers stop early; only a converged ln Z bounds)."""
+    shutil.copytree(results / "light_x2_point", results / folder, dirs_exist_ok=True)
+    path = results / folder / "result.json"
+    result = json.loads(path.read_text())
+    result["log_evidence"] = result["sampler"]["log_evidence"] = log_evidence
+    result["converged"] = result["sampler"]["converged"] = True
+    path.write_text(json.dumps(result))
+
+
+def _bounded_x2(results, mock_dir, folder, reference, log_evidence):  # noqa: F811
+    """LIGHT X2 into ``folder``, bounded by a reference candidate of ln Z ``log_evidence``."""
+    _reference_with_evidence(results, reference, log_evidence)
+    x2 = dataclasses.replace(LENS, mge_sets=2, point_set=False)
+    run.run_phase(
+        "light", mock_dir, results, capped_settings(), x2, seed=1, threads=1,
+        folder_name=folder, bound_by=(reference, 5.0),
+    )  # fmt: skip
+
+
+def test_a_candidate_that_cannot_win_is_bounded_not_sampled(candidate_run, mock_dir):  # noqa: F811
+    """X2 against a reference whose ln Z lies far above anything X2 reaches: the phase
+    writes the local search's maximum, which the choice reads as an upper bound."""
+    results, _ = candidate_run
+    _bounded_x2(results, mock_dir, "light_bounded", "light_far", 1e7)
+    result = json.loads((results / "light_bounded" / "result.json").read_text())
+    assert result["sampler"]["method"] == light_bound.METHOD
+    assert result["sampler"]["n_calls"] <= light_bound.SEARCH_CALLS + 20
+    assert "not sampled" in result["stop_reason"]
+    bounded = Candidate.read(results / "light_bounded", LightModel(2, False))
+    assert bounded.bounded
+    # the bound is the highest ln ε found, at least the sampled X2's highest
+    sampled = Candidate.read(results / "light_x2", LightModel(2, False))
+    assert bounded.log_evidence >= bounded.max_log_evidence
+    assert bounded.log_evidence >= sampled.max_log_evidence - 1e-6
+    far = dataclasses.replace(sampled, label="X6+point", log_evidence=1e7, n_linear=10**4)
+    assert choose([bounded, far], 5.0).label == "X6+point"
+    within = dataclasses.replace(far, log_evidence=bounded.log_evidence + 1.0)
+    with pytest.raises(ValueError, match="were not sampled"):
+        choose([bounded, within], 5.0)
+
+
+def test_a_candidate_that_could_win_is_sampled(candidate_run, mock_dir):  # noqa: F811
+    results, _ = candidate_run
+    _bounded_x2(results, mock_dir, "light_sampled", "light_near", -1e7)
+    sampled = json.loads((results / "light_sampled" / "result.json").read_text())
+    again = json.loads((results / "light_x2" / "result.json").read_text())
+    assert sampled["sampler"]["method"] == again["sampler"]["method"] != light_bound.METHOD
+    assert sampled["log_evidence"] == again["log_evidence"]
+    with pytest.raises(ValueError, match="only a LIGHT candidate"):
+        run.run_phase("mass", mock_dir, results, capped_settings(), LENS, bound_by=("x", 5.0))
+    with pytest.raises(FileNotFoundError, match=r"light_x6_point/result\.json not found"):
+        run.run_phase(
+            "light", mock_dir, results, capped_settings(), LENS, bound_by=("light_x6_point", 5.0)
+        )
 
 
 def test_a_phase_folder_must_be_one_name(mock_dir, tmp_path):  # noqa: F811

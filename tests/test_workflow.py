@@ -476,9 +476,9 @@ def test_paper_sheet_is_the_pyautolens_groups_41_lenses_with_boltons_redshifts(s
     assert (sheet["point_set"] == "auto").all()
 
 
-def test_light_models_chosen_by_evidence_and_a_sheet_pixel_scale(tmp_path):
-    """`auto` rows fit each candidate LIGHT into its folder and choose among them; pinned
-    rows fit LIGHT once; a `pixel_scale` cell reaches every phase and the preview."""
+def _light_choice_sample(tmp_path, extra_config: str = "") -> Path:
+    """Three real-layout lenses: A chooses among X2+point, X6+point and X2, B among X2+point
+    and X2, C pins X4; B's sheet gives a pixel scale. Returns the config file."""
     from mgelens.imaging import Imaging
 
     shape = (41, 41)
@@ -496,8 +496,26 @@ def test_light_models_chosen_by_evidence_and_a_sheet_pixel_scale(tmp_path):
     config = tmp_path / "config.yaml"
     config.write_text(
         f"samples: {tmp_path / 'sheet.tsv'}\ndata_dir: {tmp_path / 'data'}\n"
-        "model_choice_threshold: 3.5\n"
+        "model_choice_threshold: 3.5\n" + extra_config
     )
+    return config
+
+
+def test_every_light_candidate_sampled_without_the_bound(tmp_path):
+    config = _light_choice_sample(tmp_path, "model_choice_bound: false\n")
+    result = snakemake(
+        "results/A/mass/result.json", "-n", "-p", "--configfile", str(config), workdir=tmp_path
+    )
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    assert job_counts(output)["light_candidate"] == 3
+    assert "--bound-by" not in output
+
+
+def test_light_models_chosen_by_evidence_and_a_sheet_pixel_scale(tmp_path):
+    """`auto` rows fit each candidate LIGHT into its folder and choose among them; pinned
+    rows fit LIGHT once; a `pixel_scale` cell reaches every phase and the preview."""
+    config = _light_choice_sample(tmp_path)
     targets = [f"results/{lens}/mass/result.json" for lens in "ABC"]
     result = snakemake(
         *targets, "results/B/figures/preview.png", "-n", "-p", "--configfile", str(config),
@@ -509,13 +527,18 @@ def test_light_models_chosen_by_evidence_and_a_sheet_pixel_scale(tmp_path):
     assert counts["light_candidate"] == 3 + 2
     assert counts["choose_light"] == 2
     assert counts["phase_light"] == 1
+    bound = "--bound-by light_x6_point --bound-threshold 3.5"
     for folder, options in [
-        ("light_x2_point", "--mge-sets 2 --point-set yes"),
-        ("light_x6_point", "--mge-sets 6 --point-set yes"),
-        ("light_x2", "--mge-sets 2 --point-set no"),
+        ("light_x2_point", f"--mge-sets 2 --point-set yes --folder light_x2_point {bound}"),
+        ("light_x6_point", "--mge-sets 6 --point-set yes --folder light_x6_point"),
+        ("light_x2", f"--mge-sets 2 --point-set no --folder light_x2 {bound}"),
     ]:
         assert f"mgelens phase light --lens-dir {tmp_path / 'data' / 'A'} " in output
-        assert f"{options} --folder {folder} --seed 0" in output
+        assert f"{options} --seed 0" in output
+        # the candidate with the most linear unknowns is fitted first and bounds the others
+        job = re.search(rf"input: ([^\n]*)\n\s+output: results/A/{folder}/result.json", output)
+        assert ("results/A/light_x6_point/result.json" in job.group(1)) == (bound in options)
+    assert "--folder light_x2 --bound-by light_x2_point --bound-threshold 3.5" in output
     assert "--candidates X2+point X6+point X2 --threshold 3.5" in output
     assert "--results results/B --candidates X2+point X2 --threshold 3.5" in output
     assert "--results results/C --threads 1 --mask-radius 0.8 --mge-sets 4 --point-set no" in output

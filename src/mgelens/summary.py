@@ -47,7 +47,8 @@ light_chosen_by                 ``evidence`` (LIGHT candidates compared, ``model
                                 next to the summary) or ``sheet`` (the sheet pins the model)
 light_evidence_margin           ln Z of the chosen candidate minus the highest ln Z of the
                                 others (NaN when pinned; negative when a simpler model
-                                within the threshold was taken)
+                                within the threshold was taken; a lower bound where the
+                                others' ln Z are upper bounds, ``light_models.csv``)
 theta_e                         θ_E^AG (arcsec), MASS posterior median
 theta_e_err_lo, theta_e_err_hi  its 1σ (68.27 %) errors: median − lower, upper − median
 theta_e_lt                      θ_E^LT = θ_E^AG √q (2/(1+q))^{1/(γ−1)}, arcsec (SPEC §3.3),
@@ -94,9 +95,11 @@ warning) when the reference folder is absent.
 
 :func:`light_model_table` lists every LIGHT candidate of the lenses whose model was
 chosen by evidence (``results/summary/light_models.csv``), one row per lens and
-candidate: :data:`LIGHT_MODEL_COLUMNS`, with ``log_evidence`` the sampler's ln Z and
-``chi_squared``, ``n_linear`` (lens-light amplitudes + source pixels) and ``n_free`` those
-of the candidate's fit (:class:`mgelens.pipeline.model_choice.Candidate`).
+candidate: :data:`LIGHT_MODEL_COLUMNS`, with ``log_evidence`` the sampler's ln Z (where
+``bounded``, an upper bound of it: the candidate could not win and was not sampled,
+:mod:`mgelens.pipeline.light_bound`) and ``chi_squared``, ``n_linear`` (lens-light
+amplitudes + source pixels) and ``n_free`` those of the candidate's fit
+(:class:`mgelens.pipeline.model_choice.Candidate`).
 """
 
 import json
@@ -187,6 +190,7 @@ LIGHT_MODEL_COLUMNS = (
     "n_linear",
     "n_free",
     "converged",
+    "bounded",
     "chosen",
 )
 """Columns of :func:`light_model_table`."""
@@ -369,7 +373,8 @@ def light_model_table(lens_folders: Iterable[tuple[str, str | os.PathLike]]) -> 
                 {
                     "lens": lens,
                     "candidate": candidate["label"],
-                    **{name: candidate[name] for name in LIGHT_MODEL_COLUMNS[2:-1]},
+                    **{name: candidate[name] for name in LIGHT_MODEL_COLUMNS[2:-2]},
+                    "bounded": candidate.get("bounded", False),
                     "chosen": candidate["label"] == choice["chosen"],
                 }
             )

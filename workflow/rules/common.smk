@@ -409,6 +409,9 @@ def phase_inputs(wildcards) -> dict:
         files[name] = f"results/{wildcards.lens}/{name}/result.json"
     if "spix1" in earlier:
         files["adapt_image"] = f"results/{wildcards.lens}/spix1/adapt_image.fits"
+    reference = light_bound_reference(wildcards)
+    if reference is not None:
+        files["bound_by"] = f"results/{wildcards.lens}/{reference}/result.json"
     return files
 
 
@@ -436,6 +439,16 @@ def light_model_of(wildcards):
     return next(m for m in models if m.folder == wildcards.phase)
 
 
+def light_bound_reference(wildcards) -> str | None:
+    """Folder of the LIGHT candidate that bounds this one (`mgelens phase --bound-by`): the
+    lens's candidate with the most linear unknowns, fitted first, for each of its other
+    candidates when `model_choice_bound` is on; None for every other phase."""
+    if not (config["model_choice_bound"] and wildcards.phase.startswith("light_")):
+        return None
+    largest = max(lens_light_models(wildcards.lens), key=lambda m: (m.mge_sets, m.point_set))
+    return None if largest.folder == wildcards.phase else largest.folder
+
+
 def phase_options(wildcards) -> str:
     """Per-lens CLI options from the sample sheet: the mask radius, pixel scale and
     contaminants file, and for
@@ -450,6 +463,9 @@ def phase_options(wildcards) -> str:
         options += f" --mge-sets {model.mge_sets} --point-set {point}"
         if wildcards.phase != "light":
             options += f" --folder {wildcards.phase}"
+    reference = light_bound_reference(wildcards)
+    if reference is not None:
+        options += f" --bound-by {reference} --bound-threshold {config['model_choice_threshold']}"
     return options + f" --seed {config['sampler_seed']}"
 
 

@@ -15,7 +15,9 @@ then ``--slam`` (the same content as JSON; the workflow passes its config's sect
 way). What is set per lens (:class:`~mgelens.pipeline.settings.LensSpec`, the sample
 sheet's columns) comes from ``--mask-radius`` (default: the folder's ``truth.json``),
 ``--mask-centre``, ``--pixel-scale``, ``--contaminants`` (a text file of circles),
-``--mge-sets`` (default 4) and ``--point-set`` (default yes).
+``--mge-sets`` (default 4) and ``--point-set`` (default yes). A LIGHT candidate given
+``--bound-by`` is not sampled when it cannot win the model choice against that folder's
+candidate (:mod:`mgelens.pipeline.light_bound`).
 """
 
 import argparse
@@ -29,6 +31,7 @@ from mgelens.imaging_input import ImagingError
 from mgelens.mask import read_contaminant_circles
 from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import records
+from mgelens.pipeline.model_choice import DEFAULT_THRESHOLD
 from mgelens.pipeline.run import run_phase
 from mgelens.pipeline.settings import (
     MGE_SET_CHOICES,
@@ -114,6 +117,20 @@ def register(subparsers) -> None:
         default="yes" if LensSpec.point_set else "no",
         help="add the point set (light phase)",
     )
+    parser.add_argument(
+        "--bound-by",
+        metavar="FOLDER",
+        help="light only: a more complex LIGHT candidate already fitted in <results>/FOLDER; "
+        "this candidate is not sampled if a local search of its highest ln ε shows that it "
+        "cannot come within --bound-threshold of FOLDER's ln Z (it writes that maximum, "
+        "an upper bound of its ln Z)",
+    )
+    parser.add_argument(
+        "--bound-threshold",
+        type=float,
+        default=DEFAULT_THRESHOLD,
+        help=f"the model choice's ln Z threshold for --bound-by (default {DEFAULT_THRESHOLD})",
+    )
     parser.set_defaults(func=run)
 
 
@@ -140,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
             lens,
             seed=args.seed,
             folder_name=folder,
+            bound_by=None if args.bound_by is None else (args.bound_by, args.bound_threshold),
         )
     except (SettingsError, ImagingError, records.PhaseInputError, ValueError, OSError) as error:
         logger.error("phase %s: %s", args.phase, error)

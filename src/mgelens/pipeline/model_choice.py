@@ -15,9 +15,13 @@ scale). The MGE amplitudes carry no prior (SPEC §7), so extra Gaussians pay no 
 penalty of their own in ln ε; the threshold is what keeps a model with three times the
 linear unknowns from winning on noise.
 
+A candidate that cannot win need not be sampled: its ln Z is at most its highest ln ε,
+and the workflow fits the most complex candidate first and bounds the others by it
+(:mod:`mgelens.pipeline.light_bound`; ``model_choice_bound`` in the config).
+
 ``model_choice.json`` records every candidate (label, ln Z and its error, the ln ε, ln L
-and χ² of its maximum-likelihood fit, linear unknowns, free parameters, convergence),
-the threshold, the rule and ``chosen``.
+and χ² of its maximum-likelihood fit, linear unknowns, free parameters, convergence,
+whether its ln Z is an upper bound), the threshold, the rule and ``chosen``.
 """
 
 import json
@@ -28,6 +32,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from mgelens.atomic import atomic_path, write_json
+from mgelens.pipeline import light_bound
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE
 
 DEFAULT_THRESHOLD = 5.0
@@ -94,7 +99,9 @@ class Candidate:
     ``log_evidence`` (ln Z) and its error are the sampler's; ``max_log_evidence``,
     ``max_log_likelihood`` and ``chi_squared`` are those of the maximum-likelihood fit
     (ln ε, ln L and χ² of SPEC §7); ``n_linear`` counts the solved lens-light amplitudes
-    and source pixels.
+    and source pixels. ``bounded``: the candidate was not sampled because it could not win
+    (:mod:`mgelens.pipeline.light_bound`); its ``log_evidence`` is then an upper bound of
+    ln Z, the highest ln ε a local search found, with error 0.
     """
 
     label: str
@@ -106,6 +113,7 @@ class Candidate:
     n_linear: int
     n_free: int
     converged: bool
+    bounded: bool = False
 
     @classmethod
     def read(cls, folder: str | Path, model: LightModel) -> "Candidate":
@@ -134,6 +142,7 @@ class Candidate:
                 n_linear=amplitudes + int(record["source"].get("n_pixels", 0)),
                 n_free=sum(p["status"] == "free" for p in result["parameter_space"]["parameters"]),
                 converged=bool(result["converged"]),
+                bounded=result["sampler"]["method"] == light_bound.METHOD,
             )
         except (json.JSONDecodeError, KeyError, TypeError) as error:
             raise ValueError(
@@ -145,7 +154,15 @@ class Candidate:
 def choose(found: Sequence[Candidate], threshold: float = DEFAULT_THRESHOLD) -> Candidate:
     """The simplest candidate whose ln Z is within ``threshold`` of the highest.
 
-    Simplest = fewest linear unknowns, then fewest free parameters (module docstring).
+    Simplest = fewest linear unknowns, then fewest free parameters (module docstring). A
+    bounded candidate's upper bound stands for its ln Z: it is never the highest and never
+    within the threshold of it, since it was bounded for lying below both.
+
+    Raises
+    ------
+    ValueError
+        If a bounded candidate's bound comes within ``threshold`` of the highest sampled
+        ln Z (a bound made against another candidate or threshold).
     """
     if not found:
         raise ValueError("no LIGHT candidate to choose from")
@@ -153,6 +170,13 @@ def choose(found: Sequence[Candidate], threshold: float = DEFAULT_THRESHOLD) -> 
         raise ValueError(f"model-choice threshold must be a number >= 0, got {threshold!r}")
     best = max(c.log_evidence for c in found)
     eligible = [c for c in found if c.log_evidence >= best - threshold]
+    reached = [c.label for c in eligible if c.bounded]
+    if reached:
+        raise ValueError(
+            f"the LIGHT candidates {reached} were not sampled, but their upper bounds of ln Z "
+            f"come within {threshold} of the highest ln Z {best:.2f}: delete their folders "
+            "and fit them again (mgelens phase light without --bound-by)"
+        )
     return min(eligible, key=lambda c: (c.n_linear, c.n_free))
 
 

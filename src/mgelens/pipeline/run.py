@@ -47,7 +47,7 @@ from mgelens.atomic import atomic_path, write_json
 from mgelens.fit import FitDataset, FitError, FitResult, MGESource, figure_of_merit, fit
 from mgelens.grid import pixel_centres
 from mgelens.imaging import DATA_FILE
-from mgelens.pipeline import fittable, mass_rescan, models, products, sp_start
+from mgelens.pipeline import fittable, light_bound, mass_rescan, models, products, sp_start
 from mgelens.pipeline.phases import light, mass, sp, spix1, spix2
 from mgelens.pipeline.problem import PhaseProblem, phase_log
 from mgelens.pipeline.records import ADAPT_IMAGE_FILE, MODEL_FILE, fit_record, recorded_settings
@@ -84,6 +84,18 @@ class PhaseLikelihood:
     model: models.PhaseModel
     positions: models.PositionsPenalty | None = None
     passive_start: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, problem: PhaseProblem) -> "PhaseLikelihood":
+        """The sampler's likelihood of ``problem``, every NNLS warm-started from
+        :func:`reference_passive_set`."""
+        return cls(
+            problem.dataset,
+            problem.space,
+            problem.model,
+            problem.positions,
+            reference_passive_set(problem),
+        )
 
     def __call__(self, x: np.ndarray) -> float:
         values = self.space.values(x)
@@ -330,13 +342,7 @@ def _sample_problems(
             problem.dataset.data.size,
             _mesh_label(problem, len(problems)),
         )
-        likelihood = PhaseLikelihood(
-            problem.dataset,
-            problem.space,
-            problem.model,
-            problem.positions,
-            reference_passive_set(problem),
-        )
+        likelihood = PhaseLikelihood.of(problem)
         reference = None if problem.reference is None else problem.space.vector(problem.reference)
         runs.append((likelihood, problem.space, checkpoint, run_seed, reference))
     return _sample_runs(runs, sampler, folder)
@@ -477,6 +483,7 @@ def run_phase(
     seed: int = 0,
     threads: int | None = None,
     folder_name: str | None = None,
+    bound_by: tuple[str, float] | None = None,
 ) -> PhaseResult:
     """Run phase ``name`` of the lens in ``lens_dir``; write ``results_dir/<name>/``.
 
@@ -500,6 +507,13 @@ def run_phase(
         Write ``results_dir/<folder_name>/`` instead: a candidate LIGHT model
         (:mod:`mgelens.pipeline.model_choice`). Earlier phases are always read from
         their own folders.
+    bound_by : (str, float), optional
+        LIGHT only: ``(folder, threshold)`` of a more complex candidate already fitted in
+        ``results_dir/<folder>/`` and the model choice's threshold. If a local search of
+        this candidate's highest ln ε shows that it cannot come within the threshold of
+        that candidate's ln Z (:mod:`~mgelens.pipeline.light_bound`), the phase writes the
+        maximum found instead of sampling (``sampler.method`` "upper_bound"); otherwise it
+        samples as usual.
 
     Returns
     -------
@@ -507,6 +521,8 @@ def run_phase(
     """
     if name not in PHASES:
         raise ValueError(f"unknown phase {name!r}; phases are {list(PHASES)}")
+    if bound_by is not None and name != "light":
+        raise ValueError(f"only a LIGHT candidate can be bounded by another, not phase {name!r}")
     if folder_name is not None and (
         Path(folder_name).name != folder_name or folder_name in ("", ".", "..")
     ):
@@ -533,7 +549,71 @@ def run_phase(
             problems = [started_sp(first, folder, checksums)]
         if name == "spix1" and settings.spix1_rescan:
             problems = [rescanned_spix1(first, folder, checksums, settings)]
+        if bound_by is not None:
+            skipped = _bounded_candidate(
+                first, results_dir, bound_by, folder, settings, lens, lens_dir, checksums
+            )
+            if skipped is not None:
+                return skipped
         return _solve(problems, folder, settings, lens, seed, lens_dir, checksums)
+
+
+def _bounded_candidate(
+    problem: PhaseProblem,
+    results_dir: Path,
+    bound_by: tuple[str, float],
+    folder: Path,
+    settings: SlamSettings,
+    lens: LensSpec,
+    lens_dir: Path,
+    checksums: dict,
+) -> PhaseResult | None:
+    """The LIGHT candidate ``problem`` written as its local maximum, if that shows it cannot
+    win against the converged candidate in ``results_dir/<bound_by[0]>/``
+    (:mod:`~mgelens.pipeline.light_bound`); None (sample it) otherwise."""
+    reference_folder, threshold = bound_by
+    if not (results_dir / reference_folder / RESULT_FILE).is_file():
+        raise FileNotFoundError(
+            f"{results_dir / reference_folder / RESULT_FILE} not found: fit the LIGHT "
+            f"candidate {reference_folder!r} before bounding another by it (or drop --bound-by)"
+        )
+    reference = PhaseResult.read(results_dir / reference_folder)
+    if not reference.output.converged:
+        logger.info("%s did not converge: this candidate is sampled", reference_folder)
+        return None
+    likelihood = PhaseLikelihood.of(problem)
+    maximum = light_bound.search_maximum(likelihood, problem.space)
+    values = problem.space.values(maximum.x)
+    best = fit(problem.dataset, problem.model.build(values))
+    # the fit without the sampler's warm-started NNLS may end on another active set; the
+    # higher of the two ln ε is the bound (the lower could fall below the true maximum)
+    maximum = dataclasses.replace(maximum, value=max(maximum.value, best.log_evidence))
+    gap = reference.output.log_evidence - maximum.value
+    if not light_bound.cannot_win(maximum, reference.output.log_evidence, threshold):
+        logger.info(
+            "highest ln ε found %.2f (%d calls) lies %.2f below the ln Z of %s, within the "
+            "threshold %.1f + slack %.1f: this candidate is sampled",
+            maximum.value,
+            maximum.n_calls,
+            gap,
+            reference_folder,
+            threshold,
+            light_bound.SLACK,
+        )
+        return None
+    output = light_bound.bounded_output(
+        maximum, problem.space, reference_folder, reference.output.log_evidence
+    )
+    phase = PhaseResult(
+        phase=problem.name,
+        space=problem.space,
+        output=output,
+        settings=_phase_settings([problem], [output], 0, settings, lens, lens_dir),
+        input_checksums=checksums,
+    )
+    _write_outputs(folder, phase, best, fit_record(best, problem.model, values), lens_dir.name)
+    logger.info("phase light done: %s, %d calls", output.stop_reason, output.n_calls)
+    return phase
 
 
 def started_sp(problem: PhaseProblem, folder: Path, checksums: dict) -> PhaseProblem:
