@@ -17,7 +17,6 @@ samples in a ninth to a quarter of their calls (docs/benchmarks.md, "LIGHT's sim
 candidates bounded by their maximum").
 """
 
-import logging
 import time
 from dataclasses import dataclass
 
@@ -26,8 +25,6 @@ from scipy import optimize
 
 from mgelens.search.model import ParameterSpace
 from mgelens.search.posterior import SamplerOutput
-
-logger = logging.getLogger("mgelens.pipeline")
 
 SEARCH_CALLS = 1500
 """Likelihood calls of the local search for a candidate's highest ln ε."""
@@ -87,8 +84,9 @@ def search_maximum(likelihood, space: ParameterSpace, max_calls: int = SEARCH_CA
         options={"maxfev": max_calls, "xtol": 1e-4, "ftol": 1e-9},
     )
     x = np.clip(found.x, low, high)
-    value = float(likelihood(space.prior_transform(x)))
-    return Maximum(space.prior_transform(x), value, calls + 1, time.perf_counter() - start)
+    # ln ε at the nearest point inside, which ``negative`` evaluated, without its penalty
+    value = -float(found.fun) + OUTSIDE_PENALTY * float(np.sum((found.x - x) ** 2))
+    return Maximum(space.prior_transform(x), value, calls, time.perf_counter() - start)
 
 
 def cannot_win(maximum: Maximum, reference_log_evidence: float, threshold: float) -> bool:
