@@ -4,6 +4,7 @@ import pytest
 import scipy.fft
 from scipy import signal
 
+from mgelens import convolve
 from mgelens.convolve import Convolver, convolve_image, separable_terms, trimmed_psf
 from mgelens.grid import pixel_centres
 
@@ -99,9 +100,11 @@ def test_transpose_blur_is_the_transpose_of_the_mask_operator(asymmetric_psf):
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-def test_fft_blurring_runs_on_the_jobs_threads(asymmetric_psf, monkeypatch, threads):
-    """scipy.fft gets numba's thread count as its workers: a one-thread phase job must not
-    spread its FFTs over every core (two such jobs side by side then slowed each other)."""
+def test_fft_blurring_runs_large_batches_on_the_jobs_threads(asymmetric_psf, monkeypatch, threads):
+    """scipy.fft gets numba's thread count as its workers for a batch of at least
+    PARALLEL_FFT_MIN_POINTS points and one worker below: a one-thread phase job must not
+    spread its FFTs over every core (two such jobs side by side then slowed each other),
+    and a small batch on two threads cost more than on one (LIGHT on an HST PSF)."""
     workers = []
     forward = scipy.fft.rfft2
 
@@ -112,16 +115,22 @@ def test_fft_blurring_runs_on_the_jobs_threads(asymmetric_psf, monkeypatch, thre
     monkeypatch.setattr(scipy.fft, "rfft2", spy)
     x, y = pixel_centres((31, 29), 0.1)
     conv = Convolver(np.hypot(x, y) > 1.1, asymmetric_psf)
-    columns = np.ones((np.count_nonzero(~conv.input_mask(True)), 3))
+    columns = np.random.default_rng(4).random((np.count_nonzero(~conv.input_mask(True)), 3))
+    job_threads = min(threads, numba.config.NUMBA_NUM_THREADS)
     previous = numba.get_num_threads()
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(job_threads)
+    blurred = {}
     try:
-        conv.blur_columns(columns, True, "fft")
+        for smallest_parallel in (1, 10**9):
+            monkeypatch.setattr(convolve, "PARALLEL_FFT_MIN_POINTS", smallest_parallel)
+            workers.clear()
+            blurred[smallest_parallel] = conv.blur_columns(columns, True, "fft")
+            data_ffts = [w for w in workers if w is not None]  # None: a kernel's FFT, once
+            assert data_ffts
+            assert set(data_ffts) == {job_threads if smallest_parallel == 1 else 1}
     finally:
         numba.set_num_threads(previous)
-    data_ffts = [w for w in workers if w is not None]  # None: a kernel's own FFT, made once
-    assert data_ffts
-    assert set(data_ffts) == {min(threads, numba.config.NUMBA_NUM_THREADS)}
+    assert np.allclose(blurred[1], blurred[10**9], rtol=0, atol=1e-14)
 
 
 def gaussian_psf(size: int, sigma: float, q: float = 1.0) -> np.ndarray:

@@ -289,6 +289,11 @@ def _gather_columns(full, picked, origins, out_index, full_frame, out):
 CROP_GAIN = 0.7
 """A column is blurred in a window cropped to its nonzero inputs when the window's FFT has
 at most this fraction of the full frame's pixels."""
+PARALLEL_FFT_MIN_POINTS = 131_072
+"""A batch of windows (columns × window pixels) is transformed on the job's threads from
+this many points, smaller batches on one: starting scipy.fft's threads costs 0.1–0.5 ms
+per transform, more than two threads save below about this size (docs/benchmarks.md,
+"Threads")."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -385,9 +390,10 @@ class _FFTGeometry:
         """Blur ``columns`` (n_in, n_col) into ``out[:, at]`` at the outputs (those columns
         of ``out`` zero on entry: outputs beyond a cropped column's window keep it)."""
         columns = np.ascontiguousarray(columns)
-        workers = numba.get_num_threads()  # the job's threads (mgelens.threads policy)
+        threads = numba.get_num_threads()  # the job's threads (mgelens.threads policy)
         for shape, (picked, origins) in self.windows(columns).items():
             stack = np.empty((picked.size, *shape))
+            workers = threads if stack.size >= PARALLEL_FFT_MIN_POINTS else 1
             full_frame = shape == self.shape
             _scatter_columns(columns, picked, origins, self.in_index, full_frame, stack)
             spectrum = scipy.fft.rfft2(stack, workers=workers, overwrite_x=True)
