@@ -219,14 +219,15 @@ def test_fft_frame_of_a_disc_in_its_blurring_region_needs_no_padding(asymmetric_
     assert padded[1] >= cols.max() - cols.min() + 1 + 1
 
 
+@pytest.mark.parametrize("threads", [1, 2])
 @pytest.mark.parametrize("shape", ["disc", "annulus_with_bar"])
 @pytest.mark.parametrize("include_blurring", [True, False])
 def test_fft_blur_of_compact_columns_equals_native_convolution(
-    asymmetric_psf, include_blurring, shape
+    asymmetric_psf, include_blurring, shape, threads
 ):
     """Columns that are zero outside small boxes (a narrow Gaussian's) are blurred in
     windows cropped to them: boxes at the frame's corners and edges, one pixel, an all-zero
-    column, and a dense one sharing the call."""
+    column, and a dense one sharing the call; on one numba thread and on two."""
     mask = fit_masks()[shape]
     conv = Convolver(mask, asymmetric_psf)
     in_mask = conv.input_mask(include_blurring)
@@ -242,7 +243,12 @@ def test_fft_blur_of_compact_columns_equals_native_convolution(
     columns[:, -1] = rng.random(rows.size)  # dense; column -2 stays zero
     windows = conv._fft_geometries[include_blurring].windows(columns)
     assert len(windows) > 1  # some columns did go to cropped windows
-    out = conv.blur_columns(columns, include_blurring, "fft")
+    previous = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        out = conv.blur_columns(columns, include_blurring, "fft")
+    finally:
+        numba.set_num_threads(previous)
     for k in range(columns.shape[1]):
         native = np.zeros(mask.shape)
         native[~in_mask] = columns[:, k]
