@@ -647,7 +647,8 @@ test_mass_rescan.py and test_pipeline.py."""
 @pytest.mark.slow
 def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     """`snakemake` (default target) on a small one-lens mock: mock, preview, the five
-    phases, isophotes of the MASS lens light, the overview figure and the summary. After
+    phases, isophotes of the MASS lens light, the overview and posterior figures and the
+    summary. After
     deleting the MASS result, asking for it reruns only MASS; the next default run redoes
     only what reads it. (Snakemake does not rebuild a missing intermediate file on its own
     while the files made from it are present.)"""
@@ -674,6 +675,8 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert pd.read_csv(tmp_path / "results" / "summary" / "light_models.csv").empty
     assert (tmp_path / "results" / "summary" / "histograms.png").stat().st_size > 10_000
     assert (lens / "figures" / "overview.png").stat().st_size > 10_000
+    assert (lens / "figures" / "posterior.png").stat().st_size > 20_000
+    assert "--truth results/M1/mock/truth.json" in result.stdout + result.stderr
     recovery = json.loads((lens / "recovery.json").read_text())
     assert {row["name"] for row in recovery["mass"]} >= {"mass.einstein_radius", "mass.slope"}
     assert set(recovery["criteria"]) == {
@@ -714,7 +717,8 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert report.returncode == 0, report.stdout + report.stderr
     assert "ERROR/" not in report.stdout + report.stderr  # a caption docutils cannot render
     html = (tmp_path / "report.html").read_text()
-    for figure in ("preview.png", "overview.png", "histograms.png", "smoothness.png",
+    for figure in ("preview.png", "overview.png", "posterior.png", "histograms.png",
+                   "smoothness.png",
                    "lens_light_nn_mge.png", "mock_table.md",
                    "isophote_recovery.png", "coverage.png"):  # fmt: skip
         assert figure in html
@@ -734,8 +738,9 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     after = snakemake("-n", f"--configfile={config}", workdir=tmp_path)
     counts = job_counts(after.stdout + after.stderr)
     assert counts == {
-        "fit_quality": 1, "isophotes": 1, "overview": 1, "recovery": 1, "recovery_table": 1,
-        "coverage": 1, "mock_study": 1, "summary": 1, "all": 1, "total": 9,
+        "fit_quality": 1, "isophotes": 1, "overview": 1, "posterior": 1, "recovery": 1,
+        "recovery_table": 1, "coverage": 1, "mock_study": 1, "summary": 1, "all": 1,
+        "total": 10,
     }  # fmt: skip
 
 

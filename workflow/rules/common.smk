@@ -347,12 +347,13 @@ def mock_study_fits(wildcards) -> str:
 
 
 def all_targets() -> list[str]:
-    """Default target: previews and overview figures, the sample summary and its figures
+    """Default target: previews, overview and posterior figures, the sample summary and its figures
     (which need every lens's SLaM chain, isophotes and quality record), and, if the sample
     has mocks, the table of their recovered truth and their posterior coverage and, if
     one of them is M1, the Appendix A smoothness scan."""
     targets = [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
     targets += [f"results/{lens}/figures/overview.png" for lens in LENSES.index]
+    targets += [f"results/{lens}/figures/posterior.png" for lens in LENSES.index]
     if (LENSES["kind"] == "mock").any():
         targets += ["results/summary/recovery.csv", "results/summary/coverage.png"]
     if SMOOTHNESS_LENSES:
@@ -425,6 +426,20 @@ def overview_inputs(wildcards) -> dict:
     files["samples"] = f"{folder}/samples.csv"
     files["model"] = f"{folder}/model.fits"
     return files
+
+
+def posterior_inputs(wildcards) -> dict:
+    """Files the posterior figure reads: MASS's result and samples, and a mock's truth."""
+    folder = f"results/{wildcards.lens}/mass"
+    files = {"result": f"{folder}/result.json", "samples": f"{folder}/samples.csv"}
+    if is_mock(wildcards.lens):
+        files["truth"] = f"{imaging_folder(wildcards.lens)}/truth.json"
+    return files
+
+
+def truth_option(wildcards, input) -> str:
+    """` --truth <truth.json>` for a mock, else ``""``."""
+    return f" --truth {input.truth}" if "truth" in input.keys() else ""
 
 
 def overview_mem_mb(wildcards, attempt) -> int:

@@ -1,4 +1,5 @@
-"""Figures per lens: the imaging preview and the overview of the final fit."""
+"""Figures per lens: the imaging preview, the overview of the final fit and its mass
+posterior."""
 
 
 rule preview:
@@ -57,3 +58,31 @@ rule overview:
     shell:
         "mgelens overview --phase results/{wildcards.lens}/mass --lens-dir {params.lens_dir:q} "
         "--lens {wildcards.lens} --out {output:q} --threads {threads} > {log:q} 2>&1"
+
+
+rule posterior:
+    input:
+        unpack(posterior_inputs),
+    output:
+        report(
+            "results/{lens}/figures/posterior.png",
+            caption="../report/posterior.rst",
+            category="Posteriors",
+            labels={"lens": "{lens}"},
+        ),
+    log:
+        "logs/{lens}/posterior.log",
+    benchmark:
+        "results/{lens}/benchmarks/posterior.tsv"
+    params:
+        mgelens_version=command_version("posterior"),
+        truth=truth_option,
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens posterior --phase results/{wildcards.lens}/mass --lens {wildcards.lens}"
+        "{params.truth} --out {output:q} > {log:q} 2>&1"

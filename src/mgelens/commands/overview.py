@@ -16,7 +16,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from mgelens.commands import add_threads_argument, make_output_folders
+from mgelens.commands import add_threads_argument, make_output_folders, read_phase
 from mgelens.fit import FitError, fit
 from mgelens.imaging_input import ImagingError
 from mgelens.overview import overview_from_fit
@@ -25,7 +25,6 @@ from mgelens.pipeline.records import PhaseInputError, recorded_lens
 from mgelens.pipeline.run import max_likelihood_problem
 from mgelens.plot import save_png
 from mgelens.plot.overview import overview_figure
-from mgelens.search.results import RESULT_FILE, PhaseResult
 from mgelens.threads import limit_threads
 
 logger = logging.getLogger(__name__)
@@ -53,29 +52,12 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def _read_phase(folder: Path) -> PhaseResult:
-    """The phase result of ``folder``; errors name the file and the fix."""
-    path = folder / RESULT_FILE
-    if not path.is_file():
-        raise PhaseInputError(
-            f"{path} not found: --phase must be the folder of a finished phase "
-            "(e.g. results/<lens>/mass)"
-        )
-    try:
-        return PhaseResult.read(folder)
-    except (OSError, KeyError, ValueError) as error:
-        raise PhaseInputError(
-            f"{folder}: cannot read the phase result ({type(error).__name__}: {error}); "
-            "rerun the phase"
-        ) from error
-
-
 def run(args: argparse.Namespace) -> int:
     limit_threads(args.threads)
     lens = args.lens or args.phase.resolve().parent.name
     try:
         make_output_folders(args.out)
-        phase = _read_phase(args.phase)
+        phase = read_phase(args.phase)
         problem, values = max_likelihood_problem(phase, args.lens_dir, args.phase.parent)
         result = fit(problem.dataset, problem.model.build(values))
         overview = overview_from_fit(

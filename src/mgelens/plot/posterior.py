@@ -1,0 +1,224 @@
+"""Corner figure of a phase's posterior: the mass and shear parameters' one- and
+two-dimensional marginals, with the truth of a mock marked.
+
+A lens modeller reads the degeneracies of a fit here (the slope against the shear and
+θ_E, the mass ellipticity against the shear: docs/coverage.md) and sees at a glance
+whether a mock's truth lies inside them. Parameters are those of
+:data:`mgelens.coverage.PARAMETERS` that the phase sampled (a parameter with no spread,
+fixed or tied, is left out). Units: centres and θ_E in arcsec (θ_E in the phase's own
+convention, SPEC §3.3), the mass angle φ in degrees counter-clockwise from +x (unwrapped
+around the highest-likelihood sample, SPEC §1.1), the shear components dimensionless.
+
+* Diagonal: the weighted marginal (histogram of the samples' weights), the weighted
+  median (solid) and central 68.27 % interval (dashed), the same numbers as
+  ``result.json``'s ``median`` and ``interval_1sigma`` (:class:`PhaseResult`), written
+  above each column.
+* Below it: the joint weighted density (histogram smoothed by one bin) with the regions
+  holding 39.3 % and 86.5 % of the weight (:data:`CONTOUR_FRACTIONS`, a two-dimensional
+  Gaussian's 1σ and 2σ), filled.
+* The truth, if given, as lines and a marker in :data:`TRUTH_COLOUR`.
+"""
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from scipy import ndimage
+
+from mgelens.coverage import PARAMETERS
+from mgelens.search.results import PhaseResult
+
+LABELS = {
+    "mass.centre_x": "mass x (″)",
+    "mass.centre_y": "mass y (″)",
+    "mass.einstein_radius": "θ_E (″)",
+    "mass.axis_ratio": "mass q",
+    "mass.angle": "mass φ (°)",
+    "mass.slope": "slope γ",
+    "shear.gamma_1": "shear γ₁",
+    "shear.gamma_2": "shear γ₂",
+}
+"""Axis label (with unit) of each parameter."""
+
+CONTOUR_FRACTIONS = (1.0 - np.exp(-0.5), 1.0 - np.exp(-2.0))
+"""Weight inside the filled regions of the joint panels: a 2D Gaussian's 1σ and 2σ
+(0.393 and 0.865)."""
+
+BINS = 30
+"""Histogram bins per axis over each panel's range."""
+
+TRUTH_COLOUR = "C3"
+
+
+def credible_levels(density: np.ndarray, fractions: Sequence[float]) -> np.ndarray:
+    """Density thresholds whose super-level sets hold ``fractions`` of the total.
+
+    For each fraction f, the returned level t is the largest value such that the cells of
+    ``density`` ≥ t hold at least f of ``density.sum()`` (highest-density regions).
+    Levels are returned in the order of ``fractions``.
+
+    Raises
+    ------
+    ValueError
+        If the density has no positive weight or a fraction is outside (0, 1].
+    """
+    values = np.sort(np.asarray(density, dtype=float).ravel())[::-1]
+    total = values.sum()
+    if not total > 0:
+        raise ValueError("the density has no positive weight")
+    cumulative = np.cumsum(values) / total
+    levels = []
+    for fraction in fractions:
+        if not 0.0 < fraction <= 1.0:
+            raise ValueError(f"fractions must lie in (0, 1], got {fraction}")
+        index = min(int(np.searchsorted(cumulative, fraction)), values.size - 1)
+        levels.append(values[index])
+    return np.array(levels)
+
+
+def _sampled(table: pd.DataFrame) -> list[str]:
+    """The parameters of :data:`PARAMETERS` with a spread in the phase's samples."""
+    return [name for name in PARAMETERS if name in table and np.ptp(table[name]) > 0]
+
+
+def _columns(phase: PhaseResult, table: pd.DataFrame, names: Sequence[str]) -> dict:
+    """The samples of ``names``; an angle unwrapped near the highest-likelihood sample and
+    moved by a multiple of 180° to the side of ``result.json``'s median (which
+    :class:`PhaseResult` reduces to [0°, 180°))."""
+    columns = {}
+    for name in names:
+        values = table[name].to_numpy(dtype=float)
+        if name.endswith(".angle"):
+            reference = phase.max_likelihood[name]
+            values = reference + np.mod(values - reference + 90.0, 180.0) - 90.0
+            middle = 0.5 * (values.min() + values.max())
+            values -= 180.0 * np.round((middle - phase.median[name]) / 180.0)
+        columns[name] = values
+    return columns
+
+
+def _truth_near(name: str, truth: float, centre: float) -> float:
+    """``truth``, an angle moved by 180° multiples to within ±90° of ``centre``."""
+    if name.endswith(".angle"):
+        return centre + (truth - centre + 90.0) % 180.0 - 90.0
+    return truth
+
+
+def _range(values: np.ndarray, weights: np.ndarray, truth: float | None) -> tuple[float, float]:
+    """Panel range: the samples holding weight, widened to the truth, padded by 5 %."""
+    held = values[weights > 1e-6 * weights.max()]
+    low, high = held.min(), held.max()
+    if truth is not None:
+        low, high = min(low, truth), max(high, truth)
+    pad = 0.05 * (high - low) if high > low else max(abs(low) * 1e-3, 1e-6)
+    return low - pad, high + pad
+
+
+def _error_text(median: float, lower: float, upper: float) -> str:
+    """``median`` with its 1σ errors, to two significant digits of the larger error."""
+    error = max(upper - median, median - lower, 1e-12)
+    digits = max(0, 1 - int(np.floor(np.log10(error))))
+    plus, minus = f"{upper - median:.{digits}f}", f"{median - lower:.{digits}f}"
+    return f"{median:.{digits}f}$^{{+{plus}}}_{{-{minus}}}$"
+
+
+def posterior_figure(
+    phase: PhaseResult, truth: Mapping[str, float] | None = None, title: str = ""
+) -> Figure:
+    """The corner figure of ``phase`` (see the module), with ``truth`` (parameter name →
+    true value, :func:`mgelens.recovery.true_mass_parameters`) marked if given.
+
+    Raises
+    ------
+    ValueError
+        If the phase sampled none of the mass and shear parameters.
+    """
+    table = phase.samples_table()
+    names = _sampled(table)
+    if not names:
+        raise ValueError(
+            f"phase {phase.phase} sampled none of the mass and shear parameters "
+            f"{list(PARAMETERS)}; draw the posterior of a mass phase (e.g. results/<lens>/mass)"
+        )
+    columns, weights = _columns(phase, table, names), table["weight"].to_numpy(dtype=float)
+    median, interval = phase.median, phase.interval(1)
+    truths = {
+        name: _truth_near(name, float(truth[name]), median[name])
+        for name in names
+        if truth is not None and name in truth
+    }
+    ranges = {name: _range(columns[name], weights, truths.get(name)) for name in names}
+
+    n = len(names)
+    size = 1.6 * n + 1.0
+    figure = Figure(figsize=(size, size), layout="constrained")
+    axes = figure.subplots(n, n, squeeze=False)
+    for row, y_name in enumerate(names):
+        for col, x_name in enumerate(names):
+            axis = axes[row, col]
+            if col > row:
+                axis.set_visible(False)
+                continue
+            if col == row:
+                _diagonal(axis, columns[x_name], weights, ranges[x_name], median[x_name],
+                          interval[x_name], truths.get(x_name))  # fmt: skip
+            else:
+                pair = (x_name, y_name)
+                _joint(axis, [columns[k] for k in pair], weights, [ranges[k] for k in pair],
+                       [truths.get(k) for k in pair])  # fmt: skip
+            axis.tick_params(labelsize=7)
+            if row == n - 1:
+                axis.set_xlabel(LABELS[x_name], fontsize=9)
+                axis.tick_params(axis="x", labelrotation=45)
+            else:
+                axis.set_xticklabels([])
+            if col == 0 and row > 0:
+                axis.set_ylabel(LABELS[y_name], fontsize=9)
+            elif col != row:
+                axis.set_yticklabels([])
+    legend = "weighted median and 68 % interval; filled: 39 % and 86 % of the weight"
+    if truths:
+        legend += "; truth in red"
+    figure.suptitle(
+        f"{title}{' – ' if title else ''}{phase.phase} posterior "
+        f"({len(weights)} samples, ln Z = {phase.output.log_evidence:.1f})\n{legend}",
+        fontsize=10,
+    )
+    return figure
+
+
+def _diagonal(axis, values, weights, limits, median, interval, truth) -> None:
+    axis.hist(values, bins=BINS, range=limits, weights=weights, histtype="step", color="k")
+    axis.axvline(median, color="k", lw=1.0)
+    for bound in interval:
+        axis.axvline(bound, color="k", lw=0.8, ls="--")
+    if truth is not None:
+        axis.axvline(truth, color=TRUTH_COLOUR, lw=1.2)
+    axis.set_xlim(limits)
+    axis.set_yticks([])
+    axis.set_title(_error_text(median, *interval), fontsize=8)
+
+
+def _joint(axis, samples, weights, limits, truth) -> None:
+    (x, y), (x_limits, y_limits), (x_truth, y_truth) = samples, limits, truth
+    density, x_edges, y_edges = np.histogram2d(
+        x, y, bins=BINS, range=(x_limits, y_limits), weights=weights
+    )
+    density = ndimage.gaussian_filter(density, 1.0)
+    if density.sum() > 0:
+        levels = credible_levels(density, CONTOUR_FRACTIONS)
+        x_mid = 0.5 * (x_edges[1:] + x_edges[:-1])
+        y_mid = 0.5 * (y_edges[1:] + y_edges[:-1])
+        bounds = [levels[1], levels[0], density.max() * (1 + 1e-9)]
+        if bounds[0] < bounds[1] < bounds[2]:
+            axis.contourf(x_mid, y_mid, density.T, levels=bounds, colors=["#9ecae1", "#3182bd"])
+            axis.contour(x_mid, y_mid, density.T, levels=bounds[:2], colors="k", linewidths=0.6)
+    if x_truth is not None:
+        axis.axvline(x_truth, color=TRUTH_COLOUR, lw=1.0)
+    if y_truth is not None:
+        axis.axhline(y_truth, color=TRUTH_COLOUR, lw=1.0)
+    if x_truth is not None and y_truth is not None:
+        axis.plot(x_truth, y_truth, "s", color=TRUTH_COLOUR, ms=4)
+    axis.set_xlim(x_limits)
+    axis.set_ylim(y_limits)
