@@ -2,6 +2,7 @@
 result.json's numbers, and angles and truths land on the samples' side of 180°."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,9 +16,11 @@ from mgelens.geometry import ell_comps_from
 from mgelens.plot.posterior import (
     CONTOUR_FRACTIONS,
     LABELS,
+    PUBLISHED_COLOUR,
     TRUTH_COLOUR,
     credible_levels,
     posterior_figure,
+    published_references,
 )
 from mgelens.search.model import ParameterSpace
 from mgelens.search.priors import Uniform
@@ -179,3 +182,53 @@ def test_command_names_a_missing_phase_and_a_bad_truth(tmp_path, caplog):
     assert main([*arguments, "--truth", str(tmp_path / "truth.json")]) == 1
     assert "cannot read the true mass" in caplog.text
     assert not out.exists()
+
+
+def test_published_references_convert_bolton_to_our_convention_and_keep_shajibs_errors():
+    """b_SIE is an SIE's intermediate-axis radius: θ_E^AG = b_SIE (1 + q) / (2 √q) (SPEC
+    §3.3 at γ = 2); Shajib's slope keeps its asymmetric errors; missing values are left out."""
+    row = {"bolton_b_sie": 1.2, "bolton_q_sie": 0.64, "shajib_gamma": 1.92}
+    row |= {"shajib_gamma_lo": 0.045, "shajib_gamma_hi": 0.079}
+    references = published_references(row)
+    assert references["mass.einstein_radius"] == pytest.approx((1.2 * 1.64 / 1.6, 0.0, 0.0))
+    assert references["mass.slope"] == (1.92, 0.045, 0.079)
+    assert published_references({"bolton_b_sie": float("nan"), "shajib_gamma": float("nan")}) == {}
+
+
+def test_published_values_are_drawn_beside_the_posterior():
+    """A published value inside the posterior's range is a line (and its 1σ band on the
+    diagonal); one beyond it is written at that edge and leaves the range alone."""
+    phase = mass_result()
+    inside = posterior_figure(phase, published={"mass.slope": (2.06, 0.04, 0.06)})
+    n = 8
+    slope = inside.axes[5 * n + 5]
+    published_lines = [
+        line.get_xdata()[0]
+        for line in slope.get_lines()
+        if colors.same_color(line.get_color(), PUBLISHED_COLOUR)
+    ]
+    assert published_lines == [2.06]
+    assert slope.patches  # the 1σ band
+    joint = inside.axes[5 * n + 2]  # γ against θ_E: a horizontal line at 2.06
+    drawn = [
+        tuple(line.get_ydata())
+        for line in joint.get_lines()
+        if colors.same_color(line.get_color(), PUBLISHED_COLOUR)
+    ]
+    assert drawn == [(2.06, 2.06)]
+    far = posterior_figure(phase, published={"mass.slope": (1.80, 0.04, 0.06)})
+    slope_far = far.axes[5 * n + 5]
+    assert slope_far.get_xlim() == slope.get_xlim()
+    assert [t.get_text() for t in slope_far.texts] == ["← 1.8"]
+
+
+def test_command_marks_a_real_lenses_published_values(tmp_path):
+    reference_dir = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "reference"
+    if not (reference_dir / "bolton2008_table5_sie.csv").is_file():
+        pytest.skip(f"published reference tables absent: expected them in {reference_dir}")
+    mass_result().write(tmp_path / "mass")
+    out = tmp_path / "posterior.png"
+    arguments = ["posterior", "--phase", str(tmp_path / "mass"), "--out", str(out)]
+    arguments += ["--lens", "slacs1250+0523", "--reference-dir", str(reference_dir)]
+    assert main(arguments) == 0
+    assert out.stat().st_size > 20_000

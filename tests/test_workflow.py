@@ -840,3 +840,37 @@ def test_chain_lens_light_scores_at_least_as_well_as_the_true_one(chain_recovery
 )
 def test_chain_recovers_the_lens_light_within_5_percent(chain_recovery):
     assert chain_recovery["criteria"]["lens_light_within_5_percent"] is True
+
+
+def test_posterior_figure_marks_a_mocks_truth_or_a_real_lenses_published_values(tmp_path):
+    """Rule posterior passes a mock its truth.json and a real lens the reference folder
+    (when the published tables are there), so each figure has what it can be held to."""
+    from mgelens.imaging import Imaging
+
+    shape = (21, 21)
+    psf = np.zeros((3, 3))
+    psf[1, 1] = 1.0
+    Imaging(np.zeros(shape), np.ones(shape), psf, 0.05).to_fits(tmp_path / "data" / "R1")
+    (tmp_path / "sheet.tsv").write_text(
+        SHEET_HEADER
+        + "R1\treal\t\tR1\t0.5\t2\tno\t0.2\t0.6\nM1\tmock\tM1\t\t1.4\t2\tno\t0.28\t0.98\n"
+    )
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    for name in ("bolton2008_table5_sie.csv", "shajib2021_slacs_powerlaw_tdcosmo2020.csv"):
+        (reference / name).write_text("name\n")
+    config = tmp_path / "config.yaml"
+    config.write_text(
+        f"samples: {tmp_path / 'sheet.tsv'}\ndata_dir: {tmp_path / 'data'}\n"
+        f"reference_dir: {reference}\n"
+    )
+    targets = [f"results/{lens}/figures/posterior.png" for lens in ("R1", "M1")]
+    result = snakemake(*targets, "-n", "-p", "--configfile", str(config), workdir=tmp_path)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    commands = [line for line in output.splitlines() if "mgelens posterior" in line]
+    by_lens = {re.search(r"--lens (\w+)", line).group(1): line for line in commands}
+    assert f"--reference-dir {reference}" in by_lens["R1"]
+    assert "--truth" not in by_lens["R1"]
+    assert "--truth results/M1/mock/truth.json" in by_lens["M1"]
+    assert "--reference-dir" not in by_lens["M1"]

@@ -437,9 +437,14 @@ def posterior_inputs(wildcards) -> dict:
     return files
 
 
-def truth_option(wildcards, input) -> str:
-    """` --truth <truth.json>` for a mock, else ``""``."""
-    return f" --truth {input.truth}" if "truth" in input.keys() else ""
+def posterior_marks(wildcards, input) -> str:
+    """` --truth <truth.json>` for a mock; for a real lens ` --reference-dir <folder>` when
+    the published tables are there (else nothing: the figure has no published values)."""
+    if "truth" in input.keys():
+        return f" --truth {input.truth}"
+    if reference_tables():
+        return f" --reference-dir {shlex.quote(str(REFERENCE_DIR))}"
+    return ""
 
 
 def overview_mem_mb(wildcards, attempt) -> int:

@@ -76,7 +76,7 @@ rule posterior:
         "results/{lens}/benchmarks/posterior.tsv"
     params:
         mgelens_version=command_version("posterior"),
-        truth=truth_option,
+        marks=posterior_marks,
     threads: 1
     resources:
         mem_mb=1000,
@@ -85,4 +85,4 @@ rule posterior:
         "../envs/mgelens.yaml"
     shell:
         "mgelens posterior --phase results/{wildcards.lens}/mass --lens {wildcards.lens}"
-        "{params.truth} --out {output:q} > {log:q} 2>&1"
+        "{params.marks} --out {output:q} > {log:q} 2>&1"

@@ -17,8 +17,14 @@ around the highest-likelihood sample, SPEC §1.1), the shear components dimensio
   holding 39.3 % and 86.5 % of the weight (:data:`CONTOUR_FRACTIONS`, a two-dimensional
   Gaussian's 1σ and 2σ), filled.
 * The truth, if given, as lines and a marker in :data:`TRUTH_COLOUR`.
+* Published values, if given (a real lens's, :func:`published_references`), as lines in
+  :data:`PUBLISHED_COLOUR`, with their 1σ band on the diagonal (a value beyond the
+  posterior's range written at that edge of the panel): Shajib et al. 2021's
+  imaging-only slope, and Bolton et al. 2008's b_SIE as θ_E^AG of an SIE with their
+  q_SIE (SPEC §3.3), which is a power law's θ_E only where γ = 2.
 """
 
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -27,6 +33,7 @@ from matplotlib.figure import Figure
 from scipy import ndimage
 
 from mgelens.coverage import PARAMETERS
+from mgelens.published import einstein_radius_ag
 from mgelens.search.results import PhaseResult
 
 LABELS = {
@@ -49,6 +56,27 @@ BINS = 30
 """Histogram bins per axis over each panel's range."""
 
 TRUTH_COLOUR = "C3"
+PUBLISHED_COLOUR = "C2"
+
+
+def published_references(published: Mapping[str, float]) -> dict[str, tuple[float, float, float]]:
+    """{parameter: (value, lower error, upper error)} from one lens's row of
+    :func:`mgelens.published.published_values`: Shajib's slope (its 1σ errors) and
+    Bolton's b_SIE converted to θ_E^AG with q_SIE and γ = 2 (no errors: 0, 0). A value
+    the tables do not have is left out."""
+    references = {}
+    gamma = published.get("shajib_gamma", math.nan)
+    if np.isfinite(gamma):
+        lower, upper = published["shajib_gamma_lo"], published["shajib_gamma_hi"]
+        references["mass.slope"] = (float(gamma), float(lower), float(upper))
+    b_sie, q_sie = published.get("bolton_b_sie", math.nan), published.get("bolton_q_sie", math.nan)
+    if np.isfinite(b_sie) and np.isfinite(q_sie):
+        references["mass.einstein_radius"] = (
+            float(einstein_radius_ag(b_sie, q_sie, 2.0)),
+            0.0,
+            0.0,
+        )
+    return references
 
 
 def credible_levels(density: np.ndarray, fractions: Sequence[float]) -> np.ndarray:
@@ -105,12 +133,15 @@ def _truth_near(name: str, truth: float, centre: float) -> float:
     return truth
 
 
-def _range(values: np.ndarray, weights: np.ndarray, truth: float | None) -> tuple[float, float]:
-    """Panel range: the samples holding weight, widened to the truth, padded by 5 %."""
+def _range(values: np.ndarray, weights: np.ndarray, marks: Sequence) -> tuple[float, float]:
+    """Panel range: the samples holding weight, widened to the marked values (a mock's
+    truth; None: none), padded by 5 %. Published values do not widen it: one far off would
+    flatten the posterior to a line (:func:`_published_band` points to it instead)."""
     held = values[weights > 1e-6 * weights.max()]
     low, high = held.min(), held.max()
-    if truth is not None:
-        low, high = min(low, truth), max(high, truth)
+    for mark in marks:
+        if mark is not None:
+            low, high = min(low, mark), max(high, mark)
     pad = 0.05 * (high - low) if high > low else max(abs(low) * 1e-3, 1e-6)
     return low - pad, high + pad
 
@@ -124,10 +155,15 @@ def _error_text(median: float, lower: float, upper: float) -> str:
 
 
 def posterior_figure(
-    phase: PhaseResult, truth: Mapping[str, float] | None = None, title: str = ""
+    phase: PhaseResult,
+    truth: Mapping[str, float] | None = None,
+    title: str = "",
+    published: Mapping[str, tuple[float, float, float]] | None = None,
 ) -> Figure:
     """The corner figure of ``phase`` (see the module), with ``truth`` (parameter name →
-    true value, :func:`mgelens.recovery.true_mass_parameters`) marked if given.
+    true value, :func:`mgelens.recovery.true_mass_parameters`) and ``published``
+    (parameter name → (value, lower error, upper error), :func:`published_references`)
+    marked if given.
 
     Raises
     ------
@@ -148,7 +184,8 @@ def posterior_figure(
         for name in names
         if truth is not None and name in truth
     }
-    ranges = {name: _range(columns[name], weights, truths.get(name)) for name in names}
+    references = {name: published[name] for name in names if published and name in published}
+    ranges = {name: _range(columns[name], weights, [truths.get(name)]) for name in names}
 
     n = len(names)
     size = 1.6 * n + 1.0
@@ -163,10 +200,12 @@ def posterior_figure(
             if col == row:
                 _diagonal(axis, columns[x_name], weights, ranges[x_name], median[x_name],
                           interval[x_name], truths.get(x_name))  # fmt: skip
+                _published_band(axis, references.get(x_name), ranges[x_name])
             else:
                 pair = (x_name, y_name)
                 _joint(axis, [columns[k] for k in pair], weights, [ranges[k] for k in pair],
                        [truths.get(k) for k in pair])  # fmt: skip
+                _published_lines(axis, *(references.get(k) for k in pair))
             axis.tick_params(labelsize=7)
             if row == n - 1:
                 axis.set_xlabel(LABELS[x_name], fontsize=9)
@@ -180,6 +219,10 @@ def posterior_figure(
     legend = "weighted median and 68 % interval; filled: 39 % and 86 % of the weight"
     if truths:
         legend += "; truth in red"
+    if references:
+        legend += (
+            "; green: published (Shajib 2021 γ ± 1σ, Bolton 2008 b_SIE as θ_E of an SIE with its q)"
+        )
     figure.suptitle(
         f"{title}{' – ' if title else ''}{phase.phase} posterior "
         f"({len(weights)} samples, ln Z = {phase.output.log_evidence:.1f})\n{legend}",
@@ -222,3 +265,37 @@ def _joint(axis, samples, weights, limits, truth) -> None:
         axis.plot(x_truth, y_truth, "s", color=TRUTH_COLOUR, ms=4)
     axis.set_xlim(x_limits)
     axis.set_ylim(y_limits)
+
+
+def _published_band(axis, reference, limits) -> None:
+    """A published value and its 1σ band on a diagonal panel (``reference`` None: none);
+    a value beyond the panel's ``limits`` is written at the edge it lies beyond."""
+    if reference is None:
+        return
+    value, lower, upper = reference
+    if limits[0] <= value <= limits[1]:
+        axis.axvline(value, color=PUBLISHED_COLOUR, lw=1.2)
+    else:
+        left = value < limits[0]
+        axis.text(
+            0.02 if left else 0.98,
+            0.9,
+            f"{'← ' if left else ''}{value:.3g}{'' if left else ' →'}",
+            transform=axis.transAxes,
+            ha="left" if left else "right",
+            va="top",
+            color=PUBLISHED_COLOUR,
+            fontsize=8,
+        )
+    if lower > 0 or upper > 0:
+        band = (max(value - lower, limits[0]), min(value + upper, limits[1]))
+        if band[0] < band[1]:
+            axis.axvspan(*band, color=PUBLISHED_COLOUR, alpha=0.15, lw=0)
+
+
+def _published_lines(axis, x_reference, y_reference) -> None:
+    """Published values on a joint panel: a vertical and/or a horizontal line."""
+    if x_reference is not None:
+        axis.axvline(x_reference[0], color=PUBLISHED_COLOUR, lw=1.0, ls="-.")
+    if y_reference is not None:
+        axis.axhline(y_reference[0], color=PUBLISHED_COLOUR, lw=1.0, ls="-.")
