@@ -232,3 +232,20 @@ def test_command_marks_a_real_lenses_published_values(tmp_path):
     arguments += ["--lens", "slacs1250+0523", "--reference-dir", str(reference_dir)]
     assert main(arguments) == 0
     assert out.stat().st_size > 20_000
+
+
+def test_a_pooled_phase_shows_each_meshs_share_of_the_marginal():
+    """MASS pools its meshes' runs (samples in turn, counts in settings' meshes): each
+    run's share is drawn on the diagonal, and the shares add up to the pooled marginal."""
+    phase = mass_result(n=3000)
+    meshes = [{"kmeans_seed": 0, "n_samples": 1200}, {"kmeans_seed": 1, "n_samples": 1800}]
+    pooled = PhaseResult("mass", phase.space, phase.output, settings={"meshes": meshes})
+    figure = posterior_figure(pooled)
+    slope = figure.axes[5 * 8 + 5]
+    heights = [patch.get_path().vertices[:, 1] for patch in slope.patches]
+    assert len(heights) == 3  # the pool and its two meshes
+    assert np.allclose(heights[0], heights[1] + heights[2])
+    assert "k-means seed 0 blue, 1 orange" in figure.get_suptitle()
+    unaccounted = [{"kmeans_seed": 0, "n_samples": 1000}, {"kmeans_seed": 1, "n_samples": 1000}]
+    other = PhaseResult("mass", phase.space, phase.output, settings={"meshes": unaccounted})
+    assert len(posterior_figure(other).axes[5 * 8 + 5].patches) == 1

@@ -12,7 +12,9 @@ around the highest-likelihood sample, SPEC §1.1), the shear components dimensio
 * Diagonal: the weighted marginal (histogram of the samples' weights), the weighted
   median (solid) and central 68.27 % interval (dashed), the same numbers as
   ``result.json``'s ``median`` and ``interval_1sigma`` (:class:`PhaseResult`), written
-  above each column.
+  above each column. Where MASS pooled the runs of several source meshes (``settings``'
+  ``meshes``, their samples stored in turn), each run's share of the marginal is drawn
+  too, in :data:`MESH_COLOURS`: where the meshes disagree the pool has several modes.
 * Below it: the joint weighted density (histogram smoothed by one bin) with the regions
   holding 39.3 % and 86.5 % of the weight (:data:`CONTOUR_FRACTIONS`, a two-dimensional
   Gaussian's 1σ and 2σ), filled.
@@ -24,6 +26,7 @@ around the highest-likelihood sample, SPEC §1.1), the shear components dimensio
   q_SIE (SPEC §3.3), which is a power law's θ_E only where γ = 2.
 """
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 
@@ -56,6 +59,8 @@ BINS = 30
 """Histogram bins per axis over each panel's range."""
 
 TRUTH_COLOUR = "C3"
+MESH_COLOURS = {"C0": "blue", "C1": "orange", "C4": "purple", "C5": "brown"}
+"""Colours of the source meshes' runs on the diagonal, in order, with their names."""
 PUBLISHED_COLOUR = "C2"
 
 
@@ -103,6 +108,16 @@ def credible_levels(density: np.ndarray, fractions: Sequence[float]) -> np.ndarr
         index = min(int(np.searchsorted(cumulative, fraction)), values.size - 1)
         levels.append(values[index])
     return np.array(levels)
+
+
+def _mesh_parts(phase: PhaseResult, n_samples: int) -> list[slice]:
+    """The sample ranges of each source mesh's run in a pooled phase (none if the phase
+    did not pool, or its record does not account for every sample)."""
+    counts = [mesh.get("n_samples") for mesh in phase.settings.get("meshes") or []]
+    if len(counts) < 2 or None in counts or sum(counts) != n_samples:
+        return []
+    edges = np.concatenate([[0], np.cumsum(counts)])
+    return [slice(int(a), int(b)) for a, b in itertools.pairwise(edges)]
 
 
 def _sampled(table: pd.DataFrame) -> list[str]:
@@ -179,6 +194,7 @@ def posterior_figure(
         )
     columns, weights = _columns(phase, table, names), table["weight"].to_numpy(dtype=float)
     median, interval = phase.median, phase.interval(1)
+    meshes = _mesh_parts(phase, len(weights))
     truths = {
         name: _truth_near(name, float(truth[name]), median[name])
         for name in names
@@ -199,7 +215,7 @@ def posterior_figure(
                 continue
             if col == row:
                 _diagonal(axis, columns[x_name], weights, ranges[x_name], median[x_name],
-                          interval[x_name], truths.get(x_name))  # fmt: skip
+                          interval[x_name], truths.get(x_name), meshes)  # fmt: skip
                 _published_band(axis, references.get(x_name), ranges[x_name])
             else:
                 pair = (x_name, y_name)
@@ -217,6 +233,12 @@ def posterior_figure(
             elif col != row:
                 axis.set_yticklabels([])
     legend = "weighted median and 68 % interval; filled: 39 % and 86 % of the weight"
+    if meshes:
+        seeds = [mesh.get("kmeans_seed") for mesh in phase.settings["meshes"]]
+        named = ", ".join(
+            f"{seed} {name}" for seed, name in zip(seeds, MESH_COLOURS.values(), strict=False)
+        )
+        legend += f"; thin: each source mesh's run (k-means seed {named})"
     if truths:
         legend += "; truth in red"
     if references:
@@ -231,8 +253,11 @@ def posterior_figure(
     return figure
 
 
-def _diagonal(axis, values, weights, limits, median, interval, truth) -> None:
+def _diagonal(axis, values, weights, limits, median, interval, truth, meshes) -> None:
     axis.hist(values, bins=BINS, range=limits, weights=weights, histtype="step", color="k")
+    for part, colour in zip(meshes, MESH_COLOURS, strict=False):  # at most four drawn
+        axis.hist(values[part], bins=BINS, range=limits, weights=weights[part],
+                  histtype="step", color=colour, lw=0.8)  # fmt: skip
     axis.axvline(median, color="k", lw=1.0)
     for bound in interval:
         axis.axvline(bound, color="k", lw=0.8, ls="--")
