@@ -293,7 +293,7 @@ PARALLEL_FFT_MIN_POINTS = 131_072
 """A batch of windows (columns × window pixels) is transformed on the job's threads from
 this many points, smaller batches on one: starting scipy.fft's threads costs 0.1–0.5 ms
 per transform, more than two threads save below about this size (docs/benchmarks.md,
-"Threads")."""
+"Small FFT batches on one thread")."""
 
 
 @dataclass(frozen=True, eq=False)

@@ -5,7 +5,7 @@ Example::
     mgelens posterior --phase results/M1/mass --truth results/M1/mock/truth.json \\
         --out results/M1/figures/posterior.png
 
-    mgelens posterior --phase results/slacs1250+0523/mass --lens slacs1250+0523 \
+    mgelens posterior --phase results/slacs1250+0523/mass --lens slacs1250+0523 \\
         --reference-dir ../shared/data/reference --out posterior.png
 
 Reads the phase's ``result.json`` and ``samples.csv`` and draws every sampled mass and

@@ -37,7 +37,7 @@ from scipy import ndimage
 
 from mgelens.coverage import PARAMETERS
 from mgelens.published import einstein_radius_ag
-from mgelens.search.results import PhaseResult
+from mgelens.search.results import PhaseResult, unwrapped_angles
 
 LABELS = {
     "mass.centre_x": "mass x (″)",
@@ -133,8 +133,7 @@ def _columns(phase: PhaseResult, table: pd.DataFrame, names: Sequence[str]) -> d
     for name in names:
         values = table[name].to_numpy(dtype=float)
         if name.endswith(".angle"):
-            reference = phase.max_likelihood[name]
-            values = reference + np.mod(values - reference + 90.0, 180.0) - 90.0
+            values = unwrapped_angles(values, phase.max_likelihood[name])
             middle = 0.5 * (values.min() + values.max())
             values -= 180.0 * np.round((middle - phase.median[name]) / 180.0)
         columns[name] = values
@@ -143,9 +142,7 @@ def _columns(phase: PhaseResult, table: pd.DataFrame, names: Sequence[str]) -> d
 
 def _truth_near(name: str, truth: float, centre: float) -> float:
     """``truth``, an angle moved by 180° multiples to within ±90° of ``centre``."""
-    if name.endswith(".angle"):
-        return centre + (truth - centre + 90.0) % 180.0 - 90.0
-    return truth
+    return float(unwrapped_angles(truth, centre)) if name.endswith(".angle") else truth
 
 
 def _range(values: np.ndarray, weights: np.ndarray, marks: Sequence) -> tuple[float, float]:

@@ -85,8 +85,9 @@ def _json_normalised(content: dict) -> dict:
     return json.loads(json.dumps(content))
 
 
-def _unwrapped_angles(angles: np.ndarray, reference: float) -> np.ndarray:
-    """Angles (degrees, period 180°) moved to within ±90° of ``reference``."""
+def unwrapped_angles(angles, reference: float):
+    """Angles (degrees, period 180°; an array or a number) moved to within ±90° of
+    ``reference``."""
     return reference + np.mod(angles - reference + 90.0, 180.0) - 90.0
 
 
@@ -154,7 +155,7 @@ class PhaseResult:
         quantiles = {}
         for name, column in self._columns.items():
             if name in derived and name.endswith(".angle"):
-                column = _unwrapped_angles(column, self.max_likelihood[name])
+                column = unwrapped_angles(column, self.max_likelihood[name])
                 values = weighted_quantile(column, weights, q)
                 values -= 180.0 * np.floor(values[0] / 180.0)
             else:
