@@ -429,20 +429,23 @@ def overview_inputs(wildcards) -> dict:
 
 
 def posterior_inputs(wildcards) -> dict:
-    """Files the posterior figure reads: MASS's result and samples, and a mock's truth."""
+    """Files the posterior figure reads: MASS's result and samples, and a mock's truth or a
+    real lens's published tables that exist (:func:`reference_tables`)."""
     folder = f"results/{wildcards.lens}/mass"
     files = {"result": f"{folder}/result.json", "samples": f"{folder}/samples.csv"}
     if is_mock(wildcards.lens):
         files["truth"] = f"{imaging_folder(wildcards.lens)}/truth.json"
+    elif reference_tables():
+        files["reference"] = reference_tables()
     return files
 
 
 def posterior_marks(wildcards, input) -> str:
-    """` --truth <truth.json>` for a mock; for a real lens ` --reference-dir <folder>` when
-    the published tables are there (else nothing: the figure has no published values)."""
+    """` --truth <truth.json>` for a mock, ` --reference-dir <folder>` for a real lens with
+    the published tables (else nothing: the figure has no published values)."""
     if "truth" in input.keys():
         return f" --truth {input.truth}"
-    if reference_tables():
+    if "reference" in input.keys():
         return f" --reference-dir {shlex.quote(str(REFERENCE_DIR))}"
     return ""
 
