@@ -435,8 +435,8 @@ def posterior_inputs(wildcards) -> dict:
     files = {"result": f"{folder}/result.json", "samples": f"{folder}/samples.csv"}
     if is_mock(wildcards.lens):
         files["truth"] = f"{imaging_folder(wildcards.lens)}/truth.json"
-    elif reference_tables():
-        files["reference"] = reference_tables()
+    elif tables := reference_tables():
+        files["reference"] = tables
     return files
 
 
