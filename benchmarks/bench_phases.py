@@ -28,7 +28,10 @@ SPix2's nominal hyper-parameters. Stages:
 * ``source_mge_columns``, ``source_mge_blur``: SP's source-plane MGE seen through the lens;
 * ``ray_tracing``, ``border_relocation``, ``voronoi_mesh``, ``interpolation``,
   ``mapping_matrix``, ``regularization`` (with ln det H), ``kmeans`` (SPix2);
-* ``data_vector``, ``curvature`` (F, with the cached Lᵀ W L), ``nnls_and_log_dets``.
+* ``data_vector``, ``curvature`` (F, with the cached Lᵀ W L), ``nnls_and_log_dets``;
+* ``lens_light_prior``: with ``--lens-light-prior smoothness``, LIGHT's and MASS's
+  smoothness prior on the MGE intensities (its matrix, λR added to F and its log dets;
+  λ = :data:`NOMINAL_SMOOTHNESS`).
 
 Run from the repository root::
 
@@ -52,8 +55,11 @@ from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.pipeline import models
 from mgelens.pipeline.problem import load_dataset
-from mgelens.pipeline.settings import PHASES, LensSpec, profile_settings
+from mgelens.pipeline.settings import LENS_LIGHT_PRIORS, PHASES, LensSpec, profile_settings
 from mgelens.source.image_mesh import floored_adapt_image, overlay_centres
+
+NOMINAL_SMOOTHNESS = 100.0
+"""λ of the LIGHT and MASS calls with ``--lens-light-prior smoothness``."""
 
 STAGES = {
     # stage: [(file, function, caller as (file, function), or None for any caller)]
@@ -66,6 +72,11 @@ STAGES = {
     ],
     "lens_light_blur": [("convolve.py", "blur_columns", ("light.py", "blurred_columns"))],
     "source_mge_columns": [("light.py", "columns", ("fit.py", "<listcomp>"))],
+    "lens_light_prior": [
+        ("light_prior.py", "system", None),
+        ("light_prior.py", "add_to", None),
+        ("light_prior.py", "terms", None),
+    ],
     "source_mge_blur": [("convolve.py", "blur_columns", ("fit.py", "source_light_columns"))],
     "ray_tracing": [("mass.py", "ray_trace", None)],
     "border_relocation": [("border.py", "relocate_to_border", None)],
@@ -165,6 +176,8 @@ def phase_calls(lens_dir: Path, settings, lens, einstein_radius: float, n_calls:
     values = nominal_values(centre, einstein_radius, lens.mge_sets)
     sp_specs = models.mge_specs(2, False, pixel, radius)
     light_specs = models.mge_specs(lens.mge_sets, lens.point_set, pixel, radius)
+    values[models.SMOOTHNESS] = NOMINAL_SMOOTHNESS
+    prior = settings.lens_light_prior == "smoothness"
     ox, oy = overlay_centres(dataset.mask, pixel, settings.overlay_shape)
     overlay = models.MeshSourceModel(
         ox, oy, settings.spix1_regularization, settings.interpolation, settings.cross_offset
@@ -178,8 +191,8 @@ def phase_calls(lens_dir: Path, settings, lens, einstein_radius: float, n_calls:
         "sp": models.PhaseModel(sp_specs, models.MGESourceModel()),
         "spix1": spix1,
         "spix2": models.PhaseModel(sp_specs, kmeans),
-        "light": models.PhaseModel(light_specs, fixed_source),
-        "mass": models.PhaseModel(light_specs, fixed_source),
+        "light": models.PhaseModel(light_specs, fixed_source, smoothness_prior=prior),
+        "mass": models.PhaseModel(light_specs, fixed_source, smoothness_prior=prior),
     }
     mass_values = values | {"mass.slope": 2.0}
     calls = {}
@@ -272,16 +285,20 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=15, help="timed calls per phase")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--phases", nargs="+", default=list(PHASES), choices=PHASES)
+    parser.add_argument("--lens-light-prior", default="none", choices=LENS_LIGHT_PRIORS)
     args = parser.parse_args()
     set_threads(args.threads)
-    settings = profile_settings(args.profile)
+    settings = replace(profile_settings(args.profile), lens_light_prior=args.lens_light_prior)
     lens = LensSpec(
         mask_radius=args.mask_radius, mge_sets=args.mge_sets, point_set=not args.no_point_set
     )
     theta_e = args.einstein_radius or default_einstein_radius(args.lens_dir)
     calls, dataset, centre = phase_calls(args.lens_dir, settings, lens, theta_e, args.calls, seed=0)
     calls = {phase: calls[phase] for phase in args.phases}
-    print(f"lens: {args.lens_dir.name}  profile: {args.profile}  threads: {args.threads}")
+    print(
+        f"lens: {args.lens_dir.name}  profile: {args.profile}  threads: {args.threads}"
+        f"  lens_light_prior: {args.lens_light_prior}"
+    )
     print(f"host_yardstick_cpu_ms: {host_yardstick_ms():.1f}")
     print(
         f"n_image_pixels: {dataset.data.size}  light_sub_pixels: {dataset.light_grid.grid.x.size}"

@@ -15,7 +15,7 @@ LAYERS = (
     ("profiles", ("light", "mass", "analytic_blur")),
     ("source", ("source",)),
     ("inversion", ("inversion",)),
-    ("fit", ("fit", "fit_settings")),
+    ("fit", ("fit", "fit_settings", "light_prior")),
     ("search", ("search",)),
     ("pipeline", ("pipeline",)),
     ("analysis", ("simulate", "mock_light", "mock_sources", "mock_lenses",

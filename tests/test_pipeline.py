@@ -199,6 +199,52 @@ def test_fixed_components_take_the_earlier_maximum_likelihood(chain):
     )
 
 
+def test_smoothness_prior_adds_lights_lambda_and_mass_keeps_it(chain, tmp_path):
+    """``lens_light_prior: smoothness``: LIGHT samples ``lens_light.smoothness``
+    (LogUniform(1e−3, 1e7)) beside the MGE geometry, MASS fixes it at LIGHT's best, the
+    models built in both carry the prior on the extended sets and not the point set, and
+    MASS refuses a LIGHT fitted under the other choice."""
+    sp, spix1, spix2 = chain["sp"], chain["spix1"], chain["spix2"]
+    specs = models.mge_specs(4, True, PIXEL, MASK_RADIUS)
+    space = light_phase.space(specs, sp, spix1, spix2, smoothness_prior=True)
+    assert space.n_free == 15
+    assert space.parameter(models.SMOOTHNESS).prior == LogUniform(1e-3, 1e7)
+    values = {n: 0.05 for n in space.free_names} | {models.SMOOTHNESS: 40.0}
+    light = fake_result("light", space, values)
+    mass = mass_phase.space(light, spix1, spix2)
+    assert mass.parameter(models.SMOOTHNESS).value == light.max_likelihood[models.SMOOTHNESS]
+    assert models.SMOOTHNESS not in mass.free_names
+    model = models.PhaseModel(specs, models.MGESourceModel(), smoothness_prior=True)
+    sample = {**SP_VALUES, **light.max_likelihood}
+    built = model.build(sample)
+    assert built.lens_light_prior.coefficient == light.max_likelihood[models.SMOOTHNESS]
+    assert built.lens_light_prior.penalised == (True, True, True, True, False)
+    assert model.describe()["lens_light_prior"] == "smoothness"
+    assert models.PhaseModel(specs, models.MGESourceModel()).build(sample).lens_light_prior is None
+    with pytest.raises(ValueError, match="needs extended MGE sets"):
+        models.PhaseModel(specs[-1:], models.MGESourceModel(), smoothness_prior=True)
+    record = {"lens_light": {"components": [s.describe() for s in specs]}}
+    fitted = problem.EarlierPhase(tmp_path / "light", light, record)
+    plain = problem.EarlierPhase(tmp_path / "light", chain["light"], record)
+    assert fitted.smoothness_prior
+    assert not plain.smoothness_prior
+    prior = settings_from_mapping({"lens_light_prior": "smoothness"})
+    fitted.check_lens_light(prior, prior=True)
+    plain.check_lens_light(prior)
+    with pytest.raises(problem.PhaseInputError, match="lens_light_prior = 'none'"):
+        plain.check_lens_light(prior, prior=True)
+    with pytest.raises(problem.PhaseInputError, match="lens_light_prior = 'smoothness'"):
+        fitted.check_lens_light(settings_from_mapping({}), prior=True)
+    with pytest.raises(SettingsError, match="lens_light_prior: smoothness applies to the MGE"):
+        settings_from_mapping(
+            {
+                "lens_light_model": "sersic",
+                "lens_light_prior": "smoothness",
+                "fit": {"positive_only": True},
+            }
+        )
+
+
 def test_arcs_support_adds_spix2s_arc_threshold_and_later_phases_keep_it(chain):
     """``source_support: arcs``: SPix2 samples ``mesh.arc_threshold`` (LogUniform(1e−3,
     0.3)) beside its five hyper-parameters; LIGHT and MASS fix it at SPix2's best value,

@@ -40,6 +40,7 @@ from mgelens.inversion.system import (
     weighted_gram,
 )
 from mgelens.light import LightGrid, MGESet
+from mgelens.light_prior import MGESmoothnessPrior, PriorTerms
 from mgelens.mask import validate_mask
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.source.border import border_sub_pixels, relocate_to_border
@@ -156,6 +157,12 @@ class FitDataset:
     @cached_property
     def noise_normalization(self) -> float:
         return noise_normalization(self.noise_map)
+
+    @cached_property
+    def median_inverse_variance(self) -> float:
+        """w̄, the median 1/σ² of the fitted pixels: the scale of the lens-light prior
+        (:mod:`mgelens.light_prior`)."""
+        return float(np.median(self.inverse_variance))
 
     @property
     def convolver(self):
@@ -299,12 +306,17 @@ class LensModel:
         Light with fixed intensities (e.g. a Sérsic fixed by an earlier phase), subtracted
         from the data.
     source : MGESource, PixelizedSource or None
+    lens_light_prior : MGESmoothnessPrior or None
+        A smoothness prior on the lens light's MGE intensities, whose terms join the
+        log evidence (:mod:`mgelens.light_prior`); None (paper): the intensities carry no
+        prior.
     """
 
     mass: tuple = ()
     lens_light: tuple = ()
     fixed_light: tuple = ()
     source: MGESource | PixelizedSource | None = None
+    lens_light_prior: MGESmoothnessPrior | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -360,7 +372,9 @@ class FitResult:
     """Everything a fit produces; slim vectors over the unmasked pixels.
 
     ``residuals`` are data − model; ``normalized_residuals`` are (data − model)/σ.
-    ``log_evidence`` equals ``log_likelihood`` when there is no pixelized source.
+    ``log_evidence`` equals ``log_likelihood`` when there is no pixelized source and no
+    lens-light prior; ``lens_light_prior`` holds that prior's evidence terms (None without
+    one).
     """
 
     dataset: FitDataset
@@ -378,6 +392,7 @@ class FitResult:
     log_det_curvature_regularization: float = 0.0
     log_det_regularization: float = 0.0
     source: SourceReconstruction | None = None
+    lens_light_prior: PriorTerms | None = None
 
     @property
     def lens_light_intensities(self) -> np.ndarray:
@@ -581,6 +596,10 @@ def fit(
     if dense.shape[1] == 0 and operator is None:
         raise ValueError("the model has no linear light: give it lens light or a source")
     q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
+    prior = None
+    if model.lens_light_prior is not None:
+        prior = model.lens_light_prior.system(model.lens_light, dataset.median_inverse_variance)
+        log_det_prior_block = prior.add_to(q)
     if passive_start is not None and operator is not None and operator.support is not None:
         n_dense = dense.shape[1]
         passive_start = np.concatenate(
@@ -600,7 +619,17 @@ def fit(
         passive_start=passive_start,
         unconstrained=slice(lens_columns.shape[1], None) if settings.free_source else None,
     )
-    return _scored(dataset, model, solution, fixed, lens_columns, source_columns, operator, system)
+    result = _scored(
+        dataset, model, solution, fixed, lens_columns, source_columns, operator, system
+    )
+    if prior is None:
+        return result
+    terms = prior.terms(solution.x, log_det_prior_block)
+    return replace(
+        result,
+        log_evidence=result.log_evidence + terms.log_evidence_change,
+        lens_light_prior=terms,
+    )
 
 
 def _dense_light(dataset: FitDataset, model: LensModel) -> tuple[np.ndarray, ...]:

@@ -287,7 +287,9 @@ def true_light_refit(
     dataset : FitDataset
     model : LensModel
         A model with a source (e.g. a phase's maximum-likelihood model); its lens light,
-        free and fixed, is replaced.
+        free and fixed, is replaced (and a prior on its intensities dropped: the true
+        light has none to marginalise, so ln ε compares the fitted light, with its prior's
+        Occam terms, against the truth held exactly).
     true_light : ndarray
         Native image of the true PSF-convolved lens light (shape of ``dataset.imaging``,
         units of the data). It is subtracted from the data and the source alone is solved,
@@ -304,7 +306,10 @@ def true_light_refit(
         dataset.mask,
         dataset.settings,
     )
-    truth = fit(without_light, dataclasses.replace(model, lens_light=(), fixed_light=()))
+    truth = fit(
+        without_light,
+        dataclasses.replace(model, lens_light=(), fixed_light=(), lens_light_prior=None),
+    )
     return TrueLightRefit(
         n_lens_light_intensities=int(np.count_nonzero(own.lens_light_intensities)),
         chi_squared=own.chi_squared,

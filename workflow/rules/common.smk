@@ -508,8 +508,9 @@ def phase_settings(wildcards) -> str:
     """The config's slam: section as JSON, with the lens's `lens_light` settings
     (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
     changing one phase's sampler reruns that phase (and the phases after it) only;
-    `mass_source_pixels` goes to MASS only, and `source_support` and `kmeans_seeding`
-    (the k-means mesh's) to the phases from SPix2 on, likewise."""
+    `mass_source_pixels` goes to MASS only, `source_support` and `kmeans_seeding`
+    (the k-means mesh's) to the phases from SPix2 on, and `lens_light_prior` to LIGHT
+    and MASS, likewise."""
     light = lens_light_settings(wildcards.lens)
     section = {**config["slam"], **light}
     fit = {**(config["slam"].get("fit") or {}), **light.get("fit", {})}
@@ -522,6 +523,8 @@ def phase_settings(wildcards) -> str:
     if phase in ("sp", "spix1"):
         section.pop("source_support", None)
         section.pop("kmeans_seeding", None)
+    if phase in ("sp", "spix1", "spix2"):
+        section.pop("lens_light_prior", None)
     if phase in samplers:
         section["samplers"] = {phase: samplers[phase]}
     return json.dumps(section, sort_keys=True)

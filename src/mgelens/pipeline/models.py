@@ -17,6 +17,8 @@ Parameter names (stable, dotted; SPEC §8.1):
   ``regularization.inner_coefficient``, ``.outer_coefficient``, ``.signal_scale``
   (AdaptiveBrightnessSplit); k-means mesh ``mesh.weight_floor``, ``mesh.weight_power``
   and, with the arcs' support, ``mesh.arc_threshold``.
+* lens-light prior (``slam.lens_light_prior: smoothness``, LIGHT and MASS):
+  ``lens_light.smoothness``, λ of :mod:`mgelens.light_prior`.
 
 Coordinates in arcsec, ell_comps = (f cos 2φ, f sin 2φ) with φ CCW from +x (SPEC §2.1).
 Every phase's space also lists the parameters it keeps fixed (at an earlier phase's
@@ -32,6 +34,7 @@ from scipy import optimize
 
 from mgelens.fit import LensModel, MGESource, PixelizedSource
 from mgelens.light import MGESet, Sersic, log_spaced_sigmas
+from mgelens.light_prior import MGESmoothnessPrior
 from mgelens.mass import EPL, SIE, SLOPE_RANGE, ExternalShear, ray_trace
 from mgelens.pipeline.parameters import lens_parameter
 from mgelens.search.model import Parameter
@@ -46,6 +49,9 @@ MESH, REGULARIZATION = "mesh", "regularization"
 ARC_THRESHOLD = f"{MESH}.arc_threshold"
 ARC_THRESHOLD_PRIOR = LogUniform(1e-3, 0.3)
 """SPix2's prior on the source support's arc threshold (fraction of the adapt image's peak)."""
+SMOOTHNESS = f"{LENS_LIGHT}.smoothness"
+SMOOTHNESS_PRIOR = LogUniform(1e-3, 1e7)
+"""LIGHT's prior on λ of the lens light's smoothness prior (:mod:`mgelens.light_prior`)."""
 
 SOURCE_MGE_SIGMAS = log_spaced_sigmas(0.01, 1.0, 20)
 """σ (arcsec) of the SP source MGE: 20 Gaussians from 0.01″ to 1.0″ (SPEC §2.4)."""
@@ -567,19 +573,36 @@ class PhaseModel:
 
     ``fixed_light`` holds light profiles with fixed intensities (the SPix phases of the
     3×Sérsic chain keep SP's Sérsics entirely); it is subtracted from the data.
+    ``smoothness_prior``: the extended MGE sets' intensities carry the smoothness prior of
+    :mod:`mgelens.light_prior` with λ = ``values[SMOOTHNESS]`` (the point set does not).
     """
 
     lens_light: tuple[LightSpec, ...]
     source: SourceModel
     fixed_light: tuple = ()
+    smoothness_prior: bool = False
+
+    def __post_init__(self):
+        if self.smoothness_prior and not any(self._penalised):
+            raise ValueError("the smoothness prior needs extended MGE sets in the lens light")
+
+    @property
+    def _penalised(self) -> tuple[bool, ...]:
+        return tuple(isinstance(s, LightSetSpec) and s.name != "point" for s in self.lens_light)
 
     def build(self, values: Mapping[str, float]) -> LensModel:
         """Lens model of ``values``; raises :class:`UnphysicalSample` for invalid values."""
+        prior = (
+            MGESmoothnessPrior(values[SMOOTHNESS], self._penalised)
+            if self.smoothness_prior
+            else None
+        )
         return LensModel(
             mass=mass_profiles(values),
             lens_light=lens_light_components(values, self.lens_light),
             fixed_light=self.fixed_light,
             source=self.source.build(values),
+            lens_light_prior=prior,
         )
 
     @property
@@ -594,6 +617,7 @@ class PhaseModel:
         return {
             "lens_light": [s.describe() for s in self.lens_light] + fixed,
             "source": self.source.describe(),
+            **({"lens_light_prior": "smoothness"} if self.smoothness_prior else {}),
         }
 
 

@@ -20,11 +20,13 @@ PHYSICAL_LIMITS: dict[str, tuple[float, float]] = {
     "slope": SLOPE_RANGE,
     "effective_radius": (0.0, math.inf),
     "sersic_index": (0.8, 5.0),
+    "smoothness": (0.0, math.inf),
 }
 """Limits by the last component of a dotted name: |e| < 1 keeps q > 0, θ_E > 0, the EPL's
 valid slopes (:data:`mgelens.mass.SLOPE_RANGE`); a Sérsic has R_e > 0 and the anchor's
-0.8 ≤ n ≤ 5. Names ending in ``coefficient`` (regularization) get (0, inf); everything
-else is unbounded. Passed priors are truncated to these limits (SPEC §8.2)."""
+0.8 ≤ n ≤ 5; the lens light's smoothness λ > 0. Names ending in ``coefficient``
+(regularization) get (0, inf); everything else is unbounded. Passed priors are
+truncated to these limits (SPEC §8.2)."""
 
 _CENTRE = WidthModifier("absolute", 0.05)
 _ELL_COMPS = WidthModifier("absolute", 0.2)

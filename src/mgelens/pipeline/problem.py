@@ -94,14 +94,28 @@ class EarlierPhase:
             if not c.get("fixed", False)
         )
 
-    def check_lens_light(self, settings: SlamSettings) -> None:
-        """Raise :class:`PhaseInputError` unless the phase used the settings' lens light."""
+    @property
+    def smoothness_prior(self) -> bool:
+        """Whether the phase's lens light carried the smoothness prior (its space holds
+        ``lens_light.smoothness``)."""
+        return any(p.name == models.SMOOTHNESS for p in self.result.space.parameters)
+
+    def check_lens_light(self, settings: SlamSettings, prior: bool = False) -> None:
+        """Raise :class:`PhaseInputError` unless the phase used the settings' lens light
+        and, with ``prior``, their ``lens_light_prior``."""
         if self.lens_light_kind != settings.lens_light_model:
             raise PhaseInputError(
                 f"{self.folder / RESULT_FILE} was fitted with lens_light_model = "
                 f"{self.lens_light_kind!r} but the settings ask for "
                 f"{settings.lens_light_model!r}: rerun phase {self.folder.name!r} (and the "
                 "phases after it) with these settings"
+            )
+        fitted = "smoothness" if self.smoothness_prior else "none"
+        if prior and fitted != settings.lens_light_prior:
+            raise PhaseInputError(
+                f"{self.folder / RESULT_FILE} was fitted with lens_light_prior = {fitted!r} "
+                f"but the settings ask for {settings.lens_light_prior!r}: rerun phase "
+                f"{self.folder.name!r} (and the phases after it) with these settings"
             )
 
 

@@ -59,7 +59,8 @@ def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dic
     (minor-axis, arcsec) and solved intensities I₀ (data units per pixel), for a Sérsic
     R_e (arcsec), n and I_e (data units per pixel; ``fixed`` if an earlier phase set it);
     mass profiles; source description with its hyper-parameters (and, for the SP source
-    MGE, its solved intensities); figures of merit.
+    MGE, its solved intensities); figures of merit; with a lens-light prior
+    (:mod:`mgelens.light_prior`) its λ and evidence terms under ``lens_light_prior``.
     """
     components, start = [], 0
     intensities = result.lens_light_intensities
@@ -76,6 +77,16 @@ def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dic
     }
     if result.n_source_light:
         source["intensities"] = result.source_light_intensities.tolist()
+    prior = {}
+    if result.lens_light_prior is not None:
+        terms = result.lens_light_prior
+        prior["lens_light_prior"] = {
+            "kind": "smoothness",
+            "coefficient": result.model.lens_light_prior.coefficient,
+            "penalty": terms.penalty,
+            "log_det_curvature": terms.log_det_curvature,
+            "log_det_prior": terms.log_det_prior,
+        }
     return {
         "log_likelihood": result.log_likelihood,
         "log_evidence": result.log_evidence,
@@ -86,6 +97,7 @@ def fit_record(result: FitResult, model: models.PhaseModel, values: dict) -> dic
         "lens_light": {"components": components},
         "mass": [profile.to_dict() for profile in result.model.mass],
         "source": source,
+        **prior,
     }
 
 

@@ -62,6 +62,7 @@ SOURCE_SUPPORTS = ("mask", "arcs")
 PRIOR_PASSING_RULES = ("paper", "2024")
 SP_STARTS = ("prior", "search")
 SP_MASS_CENTRES = ("free", "light")
+LENS_LIGHT_PRIORS = ("none", "smoothness")
 
 
 FIT_KEYS = frozenset(f.name for f in dataclasses.fields(FitSettings))
@@ -89,6 +90,13 @@ class SlamSettings:
         free_source: true}``: Sérsic intensities ≥ 0, source free), so a settings mapping
         (YAML ``slam:`` section or ``--slam``) that sets ``lens_light_model: sersic`` must
         set ``fit.positive_only`` too (:func:`settings_from_mapping` refuses it otherwise).
+    lens_light_prior : {"none", "smoothness"}
+        The MGE lens light's intensities: free (``none``, the paper's, SPEC §7), or under
+        the smoothness prior of :mod:`mgelens.light_prior` (``smoothness``), whose
+        coefficient ``lens_light.smoothness`` LIGHT samples (LogUniform(1e−3, 1e7)) and
+        MASS keeps at LIGHT's maximum-likelihood value; the prior's terms join the log
+        evidence. The workflow passes it to LIGHT and MASS only. Not with
+        ``lens_light_model: sersic``.
     source_pixels : int
         k-means source pixels of SPix2, LIGHT and MASS (paper 1500).
     mass_source_pixels : int or None
@@ -192,6 +200,7 @@ class SlamSettings:
 
     profile: str = "quick"
     lens_light_model: str = "mge"
+    lens_light_prior: str = "none"
     source_pixels: int = 1500
     mass_source_pixels: int | None = None
     source_support: str = "mask"
@@ -227,6 +236,12 @@ class SlamSettings:
             raise SettingsError(f"slam.fit must be FitSettings, got {self.fit!r}")
         for name, value in checked.items():
             object.__setattr__(self, name, value)
+        if self.lens_light_prior != "none" and self.lens_light_model != "mge":
+            raise SettingsError(
+                f"slam.lens_light_prior: {self.lens_light_prior} applies to the MGE lens "
+                f"light only, not to lens_light_model: {self.lens_light_model}; set "
+                "lens_light_prior: none"
+            )
         object.__setattr__(self, "samplers", MappingProxyType(dict(self.samplers)))
 
     @property
@@ -286,6 +301,7 @@ _CHOICES = {
     "prior_passing": PRIOR_PASSING_RULES,
     "sp_start": SP_STARTS,
     "sp_mass_centre": SP_MASS_CENTRES,
+    "lens_light_prior": LENS_LIGHT_PRIORS,
     "source_support": SOURCE_SUPPORTS,
     "kmeans_seeding": KMEANS_SEEDINGS,
 }

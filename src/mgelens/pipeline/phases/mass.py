@@ -69,7 +69,7 @@ def problem(
     ``settings.mass_pixels`` k-means pixels) fixed, EPL + shear (8); the 3×Sérsic
     chain fits LIGHT's Sérsics together with the mass (22)."""
     sp, spix1, spix2, light = earlier_phases(results_dir, settings, "sp", "spix1", "spix2", "light")
-    light.check_lens_light(settings)
+    light.check_lens_light(settings, prior=True)
     dataset, radius = load_dataset(lens_dir, settings, lens, models.light_centre(light.result))
     mesh_settings = dataclasses.replace(settings, source_pixels=settings.mass_pixels)
     kmeans, adapt_path = kmeans_source(dataset, results_dir, mesh_settings)
@@ -85,7 +85,7 @@ def problem(
             settings.prior_passing,
             free_lens_light=light.lens_light_kind == "sersic",
         ),
-        models.PhaseModel(light.lens_light_specs, source),
+        models.PhaseModel(light.lens_light_specs, source, smoothness_prior=light.smoothness_prior),
         (*imaging_files(lens_dir), *earlier),
         radius,
         positions_penalty(sp, settings, spix1),
