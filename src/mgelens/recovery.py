@@ -263,9 +263,12 @@ class TrueLightRefit:
     regularization). ``delta_*`` = refit − phase fit; ln ε is the log evidence of a
     pixelized source, the log likelihood otherwise.
 
-    The lens light's linear intensities carry no Occam factor in ln ε (SPEC §7), so on
-    pure noise alone freeing them lowers χ² by about their number: compare
-    ``delta_chi_squared`` with ``n_lens_light_intensities``, the phase fit's non-zero ones.
+    Without a prior the lens light's linear intensities carry no Occam factor in ln ε
+    (SPEC §7), so on pure noise alone freeing them lowers χ² by about their number:
+    compare ``delta_chi_squared`` with ``n_lens_light_intensities``, the phase fit's
+    non-zero ones. ``lens_light_prior_coefficient`` is λ of the phase's smoothness prior
+    on those intensities (:mod:`mgelens.light_prior`; None without one), whose Occam terms
+    the fitted light's ln ε then pays.
     """
 
     n_lens_light_intensities: int
@@ -275,6 +278,7 @@ class TrueLightRefit:
     true_light_log_evidence: float
     delta_chi_squared: float
     delta_log_evidence: float
+    lens_light_prior_coefficient: float | None = None
 
 
 def true_light_refit(
@@ -318,6 +322,9 @@ def true_light_refit(
         true_light_log_evidence=truth.log_evidence,
         delta_chi_squared=truth.chi_squared - own.chi_squared,
         delta_log_evidence=truth.log_evidence - own.log_evidence,
+        lens_light_prior_coefficient=None
+        if model.lens_light_prior is None
+        else float(model.lens_light_prior.coefficient),
     )
 
 
@@ -409,8 +416,9 @@ def recovery_table(records: list[Mapping]) -> pd.DataFrame:
     """One row per lens from :func:`recovery_summary` records: per parameter the truth,
     median and whether the 3σ interval holds it, the θ_E relative error, lens-light
     statistics, the largest lens-light and total errors of the light split (by modulus,
-    with sign), the true-light refit's Δχ² and Δ ln ε, the isophotes' largest errors and
-    fitted and true Δq_max, ΔPA_max and extreme a₄/a, and the criteria."""
+    with sign), the true-light refit's Δχ² and Δ ln ε (and the lens-light prior's λ, NaN
+    without one), the isophotes' largest errors and fitted and true Δq_max, ΔPA_max and
+    extreme a₄/a, and the criteria."""
     rows = []
     for record in records:
         row: dict = {"lens": record["lens"]}
@@ -428,8 +436,8 @@ def recovery_table(records: list[Mapping]) -> pd.DataFrame:
             values = [annulus[key] for annulus in split]
             row[f"light_split.{key}"] = max(values, key=abs) if values else np.nan
         refit = record.get("true_light_refit") or {}
-        for key in ("delta_chi_squared", "delta_log_evidence"):
-            row[f"true_light_refit.{key}"] = refit.get(key, np.nan)
+        for key in ("delta_chi_squared", "delta_log_evidence", "lens_light_prior_coefficient"):
+            row[f"true_light_refit.{key}"] = _number(refit.get(key))
         isophotes = record.get("isophotes") or {}
         for key in _ISOPHOTE_ERRORS:
             row[f"isophotes.{key}"] = _number(isophotes.get(key))

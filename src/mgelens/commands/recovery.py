@@ -165,6 +165,12 @@ def run(args: argparse.Namespace) -> int:
         f"true lens light refit: Δχ² = {refit.delta_chi_squared:+.1f} against "
         f"{refit.n_lens_light_intensities} non-zero lens-light intensities, "
         f"Δ ln ε = {refit.delta_log_evidence:+.1f} (< 0: the data prefer the fitted lens light)"
+        + (
+            ""
+            if refit.lens_light_prior_coefficient is None
+            else f"; the fitted light under the smoothness prior, λ = "
+            f"{refit.lens_light_prior_coefficient:.3g}"
+        )
     )
     if isophotes is not None:
         _print_isophotes(isophotes)
