@@ -2,8 +2,6 @@
 evidence terms against the Gaussian marginal likelihood computed independently, and its
 plumbing through LIGHT and MASS."""
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
@@ -145,12 +143,6 @@ def test_the_true_light_refit_drops_the_prior_with_the_light():
     true_light[~dataset.mask] = own.lens_light_image
     refit = true_light_refit(dataset, model, true_light)
     assert refit.lens_light_prior_coefficient == 100.0
-    assert (
-        true_light_refit(
-            dataset, replace(model, lens_light_prior=None), true_light
-        ).lens_light_prior_coefficient
-        is None
-    )
     assert refit.log_evidence == pytest.approx(own.log_evidence)
     assert own.log_evidence < own.log_likelihood  # the prior's Occam terms
     without = fit(dataset, LensModel(mass=mass, source=source))  # no lens light at all

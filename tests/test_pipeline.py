@@ -1313,6 +1313,7 @@ def test_true_light_refit_scores_the_fit_against_a_fixed_lens_light(
     assert same.delta_chi_squared == pytest.approx(0.0, abs=1e-6 * own.chi_squared)
     assert same.delta_log_evidence == pytest.approx(0.0, abs=1e-6 * abs(own.log_evidence))
     assert same.n_lens_light_intensities == np.count_nonzero(own.lens_light_intensities) > 0
+    assert same.lens_light_prior_coefficient is None  # these chains carry no prior
     dimmer = true_light_refit(problem.dataset, model, 0.8 * own_light)
     none = true_light_refit(problem.dataset, model, 0.0 * own_light)
     assert none.delta_log_evidence < dimmer.delta_log_evidence < 0.0

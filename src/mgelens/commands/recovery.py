@@ -161,15 +161,15 @@ def run(args: argparse.Namespace) -> int:
             f"{row.lensed_source_error:+8.3f} {row.total_error:+8.3f} "
             f"{row.source_to_lens_ratio:11.2f}"
         )
+    prior = refit.lens_light_prior_coefficient
     print(
         f"true lens light refit: Δχ² = {refit.delta_chi_squared:+.1f} against "
         f"{refit.n_lens_light_intensities} non-zero lens-light intensities, "
         f"Δ ln ε = {refit.delta_log_evidence:+.1f} (< 0: the data prefer the fitted lens light)"
         + (
             ""
-            if refit.lens_light_prior_coefficient is None
-            else f"; the fitted light under the smoothness prior, λ = "
-            f"{refit.lens_light_prior_coefficient:.3g}"
+            if prior is None
+            else f"; the fitted light under the smoothness prior, λ = {prior:.3g}"
         )
     )
     if isophotes is not None:
