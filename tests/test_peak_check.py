@@ -265,7 +265,7 @@ def clouds_around(*centres):
     equal-weight samples (σ 0.05) of the Gaussian around the next of ``centres``."""
     runs = iter(centres)
 
-    def clouds(evaluation, settings, checkpoint, seed, log):
+    def clouds(evaluation, settings, checkpoint, seed, log, live_reference=None):
         samples = np.random.default_rng(seed).normal(next(runs), 0.05, (500, 2))
         log_likelihoods = np.array([gaussian(x) for x in samples])
         return equal_weight_run(

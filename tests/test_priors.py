@@ -73,6 +73,35 @@ def test_truncated_gaussian_matches_scipy(mean, sigma, lower, upper):
     np.testing.assert_allclose(prior.log_prob(x), reference.logpdf(x), rtol=1e-9)
 
 
+CDF_CASES = [
+    (Uniform(-2.0, 3.0), stats.uniform(loc=-2.0, scale=5.0)),
+    (LogUniform(1e-6, 1e6), stats.loguniform(1e-6, 1e6)),
+    (Gaussian(0.3, 0.1), stats.norm(0.3, 0.1)),
+    (TruncatedGaussian(0.8, 0.2, -1.0, 1.0), stats.truncnorm(-9.0, 1.0, loc=0.8, scale=0.2)),
+    (TruncatedGaussian(0.0, 1.0, 5.0, 10.0), stats.truncnorm(5.0, 10.0)),
+    (TruncatedGaussian(0.0, 1.0, -10.0, -5.0), stats.truncnorm(-10.0, -5.0)),
+    (TruncatedGaussian(0.0, 1.0, -3.0, 12.0), stats.truncnorm(-3.0, 12.0)),
+]
+
+
+@pytest.mark.parametrize(("prior", "reference"), CDF_CASES)
+def test_cdf_matches_scipy_and_inverts_the_transform(prior, reference):
+    """cdf is scipy's CDF (inside the support) and maps transform(u) back to u, deep
+    into both tails of the truncated Gaussians too."""
+    x = reference.ppf(np.array([1e-6, 0.01, 0.3, 0.5, 0.9, 0.99, 1 - 1e-6]))
+    np.testing.assert_allclose(prior.cdf(x), reference.cdf(x), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(prior.cdf(prior.transform(U)), U, rtol=1e-8, atol=1e-12)
+
+
+@pytest.mark.parametrize(("prior", "reference"), CDF_CASES)
+def test_cdf_outside_the_support_is_clipped(prior, reference):
+    below, above = reference.ppf(0.0) - 1.0, reference.ppf(1.0) + 1.0
+    assert prior.cdf(below) == 0.0 or not math.isfinite(below)
+    assert prior.cdf(above) == 1.0 or not math.isfinite(above)
+    assert prior.cdf(-1e300) == 0.0
+    assert prior.cdf(1e300) == 1.0
+
+
 @pytest.mark.parametrize(("lower", "upper"), [(-1.0, 1.0), (5.0, 10.0), (-math.inf, 0.5)])
 def test_truncated_gaussian_ends_stay_in_support(lower, upper):
     prior = TruncatedGaussian(0.0, 1.0, lower, upper)

@@ -183,6 +183,15 @@ class ParameterSpace:
             x[..., i] = prior.transform(u[..., i])
         return x
 
+    def unit_cube(self, x: np.ndarray) -> np.ndarray:
+        """Unit-cube coordinates of the free-parameter vector ``x``, the inverse of
+        :meth:`prior_transform` (each prior's ``cdf``; values outside a prior's support go to
+        0 or 1)."""
+        x = np.asarray(x, dtype=float)
+        if x.shape != (self.n_free,):
+            raise ValueError(f"expected a vector of length {self.n_free}, got {x.shape}")
+        return np.array([prior.cdf(x[i]) for i, prior in enumerate(self.priors)], dtype=float)
+
     def log_prior(self, x: np.ndarray) -> float:
         """Sum of the free parameters' log prior densities at the vector ``x``."""
         x = np.asarray(x, dtype=float)

@@ -1,7 +1,9 @@
 """Priors of the non-linear search and prior passing between phases (SPEC §2.4, §3, §8.2).
 
 A prior maps the unit cube onto a parameter: ``transform(u)`` is its inverse cumulative
-distribution function, vectorised over numpy arrays, which is what nested samplers need.
+distribution function, vectorised over numpy arrays, which is what nested samplers need;
+``cdf(x)`` maps a value back to its unit-cube coordinate (values outside the support are
+clipped to 0 or 1).
 Every prior has ``lower`` and ``upper`` support limits (±inf where unbounded), a
 ``log_prob`` and a JSON form (``to_dict`` / :func:`prior_from_dict`) for result files.
 
@@ -37,6 +39,11 @@ def _check_width(sigma: float) -> None:
         raise ValueError(f"sigma must be finite and positive, got {sigma}")
 
 
+def _log_difference(log_p, log_q):
+    """ln(e^log_p − e^log_q) for log_p ≥ log_q (−inf where they are equal)."""
+    return log_p + np.log(-np.expm1(log_q - log_p))
+
+
 def _bound_to_json(value: float) -> float | None:
     """JSON has no infinity: an unbounded side is written as ``null``."""
     return value if math.isfinite(value) else None
@@ -60,6 +67,11 @@ class Uniform:
     def transform(self, u: np.ndarray | float) -> np.ndarray:
         """Value at unit-cube coordinate ``u``: lower + u (upper − lower)."""
         return self.lower + np.asarray(u, dtype=float) * (self.upper - self.lower)
+
+    def cdf(self, x: np.ndarray | float) -> np.ndarray:
+        """Unit-cube coordinate of ``x``: (x − lower)/(upper − lower), clipped to [0, 1]."""
+        u = (np.asarray(x, dtype=float) - self.lower) / (self.upper - self.lower)
+        return np.clip(u, 0.0, 1.0)
 
     def log_prob(self, x: np.ndarray | float) -> np.ndarray:
         """Log density: −ln(upper − lower) inside the support, −inf outside."""
@@ -89,6 +101,11 @@ class LogUniform:
         log_lower = math.log(self.lower)
         log_range = math.log(self.upper) - log_lower
         return np.exp(log_lower + np.asarray(u, dtype=float) * log_range)
+
+    def cdf(self, x: np.ndarray | float) -> np.ndarray:
+        """Unit-cube coordinate of ``x``: ln(x/lower)/ln(upper/lower), clipped to [0, 1]."""
+        x = np.clip(np.asarray(x, dtype=float), self.lower, self.upper)
+        return np.clip(np.log(x / self.lower) / math.log(self.upper / self.lower), 0.0, 1.0)
 
     def log_prob(self, x: np.ndarray | float) -> np.ndarray:
         """Log density −ln x − ln ln(upper/lower) inside the support, −inf outside."""
@@ -124,6 +141,10 @@ class Gaussian:
     def transform(self, u: np.ndarray | float) -> np.ndarray:
         """Value at unit-cube coordinate ``u``: mean + sigma Φ⁻¹(u)."""
         return self.mean + self.sigma * special.ndtri(np.asarray(u, dtype=float))
+
+    def cdf(self, x: np.ndarray | float) -> np.ndarray:
+        """Unit-cube coordinate of ``x``: Φ((x − mean)/sigma)."""
+        return special.ndtr((np.asarray(x, dtype=float) - self.mean) / self.sigma)
 
     def log_prob(self, x: np.ndarray | float) -> np.ndarray:
         z = (np.asarray(x, dtype=float) - self.mean) / self.sigma
@@ -175,6 +196,23 @@ class TruncatedGaussian:
             )
         x = np.clip(self.mean + self.sigma * z, self.lower, self.upper)
         return np.where(u <= 0.0, self.lower, np.where(u >= 1.0, self.upper, x))
+
+    def cdf(self, x: np.ndarray | float) -> np.ndarray:
+        """Unit-cube coordinate of ``x``: [Φ(z) − Φ(a)] / [Φ(b) − Φ(a)] for z = (x − mean)/sigma,
+        from the lower tail where z < 0 and as 1 − [Φ(−z) − Φ(−b)] / [Φ(−a) − Φ(−b)] from
+        the upper tail otherwise (log space, as :meth:`transform`); 0 below the support, 1
+        above it."""
+        x = np.clip(np.asarray(x, dtype=float), self.lower, self.upper)
+        z = (x - self.mean) / self.sigma
+        a, b = self._standard_limits
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lower_tail = np.exp(_log_difference(special.log_ndtr(z), special.log_ndtr(a)))
+            upper_tail = np.exp(_log_difference(special.log_ndtr(-z), special.log_ndtr(-b)))
+        lower_tail = lower_tail / np.exp(_log_difference(special.log_ndtr(b), special.log_ndtr(a)))
+        upper_tail = upper_tail / np.exp(
+            _log_difference(special.log_ndtr(-a), special.log_ndtr(-b))
+        )
+        return np.clip(np.where(z < 0.0, lower_tail, 1.0 - upper_tail), 0.0, 1.0)
 
     def log_normalisation(self) -> float:
         """ln[Φ(b) − Φ(a)], the log prior mass of the untruncated Gaussian inside the limits."""

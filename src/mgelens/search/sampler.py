@@ -111,8 +111,17 @@ class _RunState:
         return dict, (self.snapshot(),)
 
 
-def _fingerprint(space: ParameterSpace, settings: SamplerSettings, seed: int) -> dict:
+def _fingerprint(
+    space: ParameterSpace,
+    settings: SamplerSettings,
+    seed: int,
+    live_reference: np.ndarray | None = None,
+) -> dict:
+    """What a checkpoint must match: the space, the result settings, the seed and the
+    reference point among the first live points, if any."""
     content = {"space": space.to_dict(), "settings": settings.result_settings(), "seed": seed}
+    if live_reference is not None:
+        content["live_reference"] = [float(value) for value in live_reference]
     return json.loads(json.dumps(content))
 
 
@@ -189,7 +198,11 @@ def resolve_sample_method(sample: str, n_dim: int) -> str:
     return "rwalk" if n_dim <= 20 else "rslice"
 
 
-def _new_dynesty_sampler(settings: SamplerSettings, n_dim: int, seed: int, pool):
+def _new_dynesty_sampler(
+    settings: SamplerSettings, n_dim: int, seed: int, pool, seeded: Callable | None = None
+):
+    """A new dynesty sampler; ``seeded(rstate)``, if given, returns its first live points
+    [u, v, ln L] drawn with ``rstate`` (:func:`_reference_live_points`)."""
     sample = resolve_sample_method(settings.sample, n_dim)
     options = {"nlive": settings.n_live, "bound": settings.bound, "sample": sample}
     options["facc"] = settings.facc
@@ -204,14 +217,39 @@ def _new_dynesty_sampler(settings: SamplerSettings, n_dim: int, seed: int, pool)
         if settings.method == "dynesty_dynamic"
         else dynesty.NestedSampler
     )
+    rstate = np.random.default_rng(seed)
+    if seeded is not None:
+        options["live_points"] = seeded(rstate)
     with _plateau_warnings_logged_by_mgelens():
         return factory(
-            installed_log_likelihood,
-            installed_prior_transform,
-            n_dim,
-            rstate=np.random.default_rng(seed),
-            **options,
+            installed_log_likelihood, installed_prior_transform, n_dim, rstate=rstate, **options
         )
+
+
+def _reference_live_points(
+    evaluation: Evaluation, n_live: int, reference: np.ndarray, log: Callable[[str], None]
+) -> Callable[[np.random.Generator], list[np.ndarray]]:
+    """``seeded(rstate)`` for :func:`_new_dynesty_sampler`: n_live prior draws made as
+    dynesty makes them (``rstate.random((n_live, n_dim))`` through the prior transform),
+    each scored with one counted call, with the lowest ln L replaced by ``reference``
+    (``SamplerSettings.reference_live_point``; one more call)."""
+    space = evaluation.space
+
+    def seeded(rstate: np.random.Generator) -> list[np.ndarray]:
+        u = rstate.random((n_live, space.n_free))
+        v = space.prior_transform(u)
+        log_l = np.array([evaluation.counted(x) for x in v])
+        lowest = int(np.argmin(log_l))
+        u[lowest], v[lowest] = space.unit_cube(reference), reference
+        log_l[lowest] = evaluation.counted(reference)
+        log(
+            f"dynesty_static: the reference point (ln L {log_l[lowest]:.2f}) replaces the "
+            f"lowest of the {n_live} first live points (the highest drawn: "
+            f"{np.max(np.delete(log_l, lowest)):.2f})"
+        )
+        return [u, v, log_l]
+
+    return seeded
 
 
 @contextlib.contextmanager
@@ -352,9 +390,10 @@ def _sample_dynesty(
     checkpoint_path: Path | None,
     seed: int,
     log: Callable[[str], None],
+    live_reference: np.ndarray | None = None,
 ) -> SamplerOutput:
     space = evaluation.space
-    fingerprint = _fingerprint(space, settings, seed)
+    fingerprint = _fingerprint(space, settings, seed, live_reference)
     resume = checkpoint_path is not None and checkpoint_path.exists()
     if resume:
         _check_sidecar(checkpoint_path, fingerprint)
@@ -376,7 +415,12 @@ def _sample_dynesty(
                 f"({stored['n_calls']} calls so far)"
             )
         else:
-            sampler = _new_dynesty_sampler(settings, space.n_free, seed, pool)
+            seeded = (
+                None
+                if live_reference is None
+                else _reference_live_points(evaluation, settings.n_live, live_reference, log)
+            )
+            sampler = _new_dynesty_sampler(settings, space.n_free, seed, pool, seeded)
             log(f"{settings.method}: {space.n_free} free parameters, seed {seed}")
         if stored.get("finished", False):
             final = stored
@@ -594,16 +638,21 @@ def run_nested(
     if checkpoint is not None:
         checkpoint.parent.mkdir(parents=True, exist_ok=True)
     evaluation = Evaluation(log_likelihood, space, SPAWN.Array("q", 2))
-    output = _sample_with_plateau_restarts(evaluation, settings, checkpoint, seed, log)
+    if reference is not None and not np.isfinite(space.log_prior(reference)):
+        log(f"{settings.method}: the reference point lies outside the priors: not used")
+        reference = None
+    live_reference = reference if settings.reference_live_point else None
+    output = _sample_with_plateau_restarts(
+        evaluation, settings, checkpoint, seed, log, live_reference
+    )
     if not (settings.peak_restarts and output.converged):
         return output  # an unconverged run (a cap, a plateau) is reported as such
-    if reference is not None and not np.isfinite(space.log_prior(reference)):
-        log(f"{settings.method}: the reference point lies outside the priors: not checked")
-        reference = None
     if reference is None and not settings.peak_evaluations:
         log(f"{settings.method}: no peak check (no local search, no reference point)")
         return output
-    return _with_peak_restarts(evaluation, settings, checkpoint, seed, log, output, reference)
+    return _with_peak_restarts(
+        evaluation, settings, checkpoint, seed, log, output, reference, live_reference
+    )
 
 
 def _sample_with_plateau_restarts(
@@ -612,12 +661,15 @@ def _sample_with_plateau_restarts(
     checkpoint: Path | None,
     seed: int,
     log: Callable[[str], None],
+    live_reference: np.ndarray | None = None,
 ) -> SamplerOutput:
     """One run of ``settings.method``; a static dynesty run that stops on a plateau is
-    started afresh with more live points (``plateau_restarts``)."""
+    started afresh with more live points (``plateau_restarts``). ``live_reference``: a
+    point among every dynesty run's first live points
+    (``SamplerSettings.reference_live_point``)."""
     if settings.method == "nautilus":
         return _sample_nautilus(evaluation, settings, checkpoint, seed, log)
-    output = _sample_dynesty(evaluation, settings, checkpoint, seed, log)
+    output = _sample_dynesty(evaluation, settings, checkpoint, seed, log, live_reference)
     attempts = [output]
     for attempt in range(1, settings.plateau_restarts + 1):
         if not output.stop_reason.startswith(PLATEAU_STOP):
@@ -629,7 +681,12 @@ def _sample_with_plateau_restarts(
         )
         evaluation.counts[:] = [0, 0]
         output = _sample_dynesty(
-            evaluation, restart, _restart_checkpoint(checkpoint, attempt), seed + attempt, log
+            evaluation,
+            restart,
+            _restart_checkpoint(checkpoint, attempt),
+            seed + attempt,
+            log,
+            live_reference,
         )
         attempts.append(output)
     return _with_restarts(attempts, settings.plateau_restarts)
@@ -652,6 +709,7 @@ def _with_peak_restarts(
     log: Callable[[str], None],
     output: SamplerOutput,
     reference: np.ndarray | None,
+    live_reference: np.ndarray | None,
 ) -> SamplerOutput:
     """Check that ``output`` (converged) holds its peak
     (:func:`_peak_gain`); while it does not, sample afresh with twice the live points, up
@@ -681,6 +739,7 @@ def _with_peak_restarts(
                 _restart_checkpoint(checkpoint, attempt, "peak"),
                 seed + attempt,
                 log,
+                live_reference,
             )
         gain, calls, best = _peak_gain(
             evaluation, settings, output, reference_log_likelihood, earlier_best, log

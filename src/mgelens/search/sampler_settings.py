@@ -85,6 +85,17 @@ discard_exploration
     peak_evaluations : int
         Likelihood calls of one check's local search (about); 0: no local search, the
         reference point alone is checked.
+    reference_live_point : bool
+        Static dynesty only: the ``reference`` point given to
+        :func:`~mgelens.search.sampler.run_nested` (SP's start), if it lies inside the
+        priors' support, replaces the lowest-likelihood point of every run's first live
+        points (restarts' too), which are otherwise drawn from the prior as dynesty draws
+        them. A live point leaves the set only as its lowest, so the run's highest ln L is
+        at least the reference's, and walks started from it climb its peak where the
+        prior's draws alone settle in a lower mode. One point of n_live is not drawn from
+        the prior, so the run's ln Z is not exactly the prior's evidence: for a phase that
+        hands on its maximum-likelihood model (the quick profile's SP); SPEC §8.3 draws
+        every point from the prior.
 
     The fields from ``checkpoint_every`` on change only how a run is executed, not its
     result, except that a pool (``n_processes > 1``) changes both samplers' random
@@ -119,6 +130,7 @@ discard_exploration
     peak_restarts: int = 0
     peak_tolerance: float = 2.0
     peak_evaluations: int = 400
+    reference_live_point: bool = False
 
     def __post_init__(self):
         """Check every field's type and range; a ValueError starts with the field's name."""
@@ -134,6 +146,11 @@ discard_exploration
             if not (value is None and name in _OPTIONAL_FIELDS):
                 values.number(name, value, **limits)
         values.boolean("discard_exploration", self.discard_exploration)
+        values.boolean("reference_live_point", self.reference_live_point)
+        if self.reference_live_point and self.method != "dynesty_static":
+            raise ValueError(
+                f"reference_live_point applies to method dynesty_static only, not to {self.method}"
+            )
         if self.max_iterations is not None and self.method == "nautilus":
             raise ValueError("max_iterations applies to the dynesty samplers only")
         if self.plateau_restarts and self.method != "dynesty_static":
