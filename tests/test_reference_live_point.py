@@ -1,5 +1,5 @@
 """A reference point among a static dynesty run's first live points
-(SamplerSettings.reference_live_point, the quick profile's SP and its start)."""
+(SamplerSettings.reference_live_point, an option for SP and its start)."""
 
 import dataclasses
 import json
@@ -70,8 +70,8 @@ def test_a_reference_live_point_holds_a_peak_the_prior_draws_miss():
 
 
 def test_without_the_setting_the_reference_is_not_a_live_point():
-    """reference_live_point off (every profile but the quick SP): the reference changes
-    nothing in the run."""
+    """reference_live_point off (both profiles' default): the reference changes nothing in
+    the run."""
     with_reference = run_nested(
         two_peaks, SPACE, FAST, seed=2, log=lambda _: None, reference=NARROW
     )

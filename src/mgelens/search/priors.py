@@ -105,7 +105,7 @@ class LogUniform:
     def cdf(self, x: np.ndarray | float) -> np.ndarray:
         """Unit-cube coordinate of ``x``: ln(x/lower)/ln(upper/lower), clipped to [0, 1]."""
         x = np.clip(np.asarray(x, dtype=float), self.lower, self.upper)
-        return np.clip(np.log(x / self.lower) / math.log(self.upper / self.lower), 0.0, 1.0)
+        return np.log(x / self.lower) / math.log(self.upper / self.lower)
 
     def log_prob(self, x: np.ndarray | float) -> np.ndarray:
         """Log density −ln x − ln ln(upper/lower) inside the support, −inf outside."""
@@ -205,14 +205,12 @@ class TruncatedGaussian:
         x = np.clip(np.asarray(x, dtype=float), self.lower, self.upper)
         z = (x - self.mean) / self.sigma
         a, b = self._standard_limits
+        log_mass = self.log_normalisation()  # ln[Φ(b) − Φ(a)] = ln[Φ(−a) − Φ(−b)]
         with np.errstate(divide="ignore", invalid="ignore"):
-            lower_tail = np.exp(_log_difference(special.log_ndtr(z), special.log_ndtr(a)))
-            upper_tail = np.exp(_log_difference(special.log_ndtr(-z), special.log_ndtr(-b)))
-        lower_tail = lower_tail / np.exp(_log_difference(special.log_ndtr(b), special.log_ndtr(a)))
-        upper_tail = upper_tail / np.exp(
-            _log_difference(special.log_ndtr(-a), special.log_ndtr(-b))
-        )
-        return np.clip(np.where(z < 0.0, lower_tail, 1.0 - upper_tail), 0.0, 1.0)
+            lower_tail = _log_difference(special.log_ndtr(z), special.log_ndtr(a))
+            upper_tail = _log_difference(special.log_ndtr(-z), special.log_ndtr(-b))
+        u = np.where(z < 0.0, np.exp(lower_tail - log_mass), -np.expm1(upper_tail - log_mass))
+        return np.clip(u, 0.0, 1.0)
 
     def log_normalisation(self) -> float:
         """ln[Φ(b) − Φ(a)], the log prior mass of the untruncated Gaussian inside the limits."""
@@ -221,7 +219,7 @@ class TruncatedGaussian:
             log_hi, log_lo = special.log_ndtr(-a), special.log_ndtr(-b)
         else:
             log_hi, log_lo = special.log_ndtr(b), special.log_ndtr(a)
-        return float(log_hi + np.log(-np.expm1(log_lo - log_hi)))
+        return float(_log_difference(log_hi, log_lo))
 
     def log_prob(self, x: np.ndarray | float) -> np.ndarray:
         x = np.asarray(x, dtype=float)

@@ -93,9 +93,9 @@ discard_exploration
         them. A live point leaves the set only as its lowest, so the run's highest ln L is
         at least the reference's, and walks started from it climb its peak where the
         prior's draws alone settle in a lower mode. One point of n_live is not drawn from
-        the prior, so the run's ln Z is not the prior's evidence (it came out 9–16 higher on
-        SP runs, docs/slam.md): for a phase that hands on its maximum-likelihood model, as
-        SP does; SPEC §8.3 draws every point from the prior. Off in both profiles
+        the prior, so the run's ln Z is not the prior's evidence (docs/slam.md): for a phase
+        that hands on its maximum-likelihood model, as SP does; SPEC §8.3 draws every
+        point from the prior. Off in both profiles
         (``slam: {samplers: {sp: {reference_live_point: true}}}`` turns it on for SP).
 
     The fields from ``checkpoint_every`` on change only how a run is executed, not its
