@@ -11,7 +11,6 @@ import pytest
 from mgelens.cli import main
 from mgelens.coverage import (
     TARGETS,
-    chain_seconds,
     coverage_rows,
     coverage_table,
     interval_pulls,
@@ -131,27 +130,12 @@ def test_records_without_one_sigma_intervals_leave_them_unknown():
     assert table.loc["mass.slope", "within_3sigma"] == 1.0
 
 
-def test_chain_seconds_sums_the_phase_benchmarks(tmp_path):
-    for name, seconds in (
-        ("sp", 100.0),
-        ("spix1", 20.0),
-        ("spix2", 30.0),
-        ("light_x2_point", 5.0),
-        ("mass", 45.0),
-        ("simulate_mock", 999.0),
-        ("choose_light", 999.0),
-    ):
-        (tmp_path / f"{name}.tsv").write_text(f"s\th:m:s\n{seconds}\t0:00:00\n")
-    assert chain_seconds(tmp_path) == pytest.approx(200.0)
-    assert np.isnan(chain_seconds(tmp_path / "none"))
-
-
 def test_command_writes_the_tables_and_the_figure(tmp_path):
     paths = []
     for record in records([0.01, -0.03, 0.3]):
         folder = tmp_path / record["lens"]
         (folder / "benchmarks").mkdir(parents=True)
-        (folder / "benchmarks" / "sp.tsv").write_text("s\n600\n")
+        (folder / "benchmarks" / "sp.tsv").write_text("s\tmax_rss\tcpu_time\n600\t300\t590\n")
         (folder / "recovery.json").write_text(json.dumps(record))
         paths.append(str(folder / "recovery.json"))
     out = tmp_path / "summary"

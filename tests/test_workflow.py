@@ -647,8 +647,8 @@ test_mass_rescan.py and test_pipeline.py."""
 @pytest.mark.slow
 def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     """`snakemake` (default target) on a small one-lens mock: mock, preview, the five
-    phases, isophotes of the MASS lens light, the overview and posterior figures and the
-    summary. After
+    phases, isophotes of the MASS lens light, the overview and posterior figures, the
+    summary and the chain's cost. After
     deleting the MASS result, asking for it reruns only MASS; the next default run redoes
     only what reads it. (Snakemake does not rebuild a missing intermediate file on its own
     while the files made from it are present.)"""
@@ -676,6 +676,15 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert (tmp_path / "results" / "summary" / "histograms.png").stat().st_size > 10_000
     assert (lens / "figures" / "overview.png").stat().st_size > 10_000
     assert (lens / "figures" / "posterior.png").stat().st_size > 20_000
+    cost = pd.read_csv(tmp_path / "results" / "summary" / "chain_cost.csv").iloc[0]
+    assert cost["lens"] == "M1"
+    assert bool(cost["complete"])
+    for phase in ("sp", "spix1", "spix2", "light", "mass"):
+        measured = pd.read_csv(lens / "benchmarks" / f"{phase}.tsv", sep="\t")
+        assert cost[f"{phase}_cpu_s"] == pytest.approx(measured["cpu_time"].sum())
+    n_calls = json.loads((lens / "mass" / "result.json").read_text())["sampler"]["n_calls"]
+    assert cost["mass_calls"] == n_calls
+    assert (tmp_path / "results" / "summary" / "chain_cost.png").stat().st_size > 10_000
     assert "--truth results/M1/mock/truth.json" in result.stdout + result.stderr
     recovery = json.loads((lens / "recovery.json").read_text())
     assert {row["name"] for row in recovery["mass"]} >= {"mass.einstein_radius", "mass.slope"}
@@ -720,7 +729,7 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     for figure in ("preview.png", "overview.png", "posterior.png", "histograms.png",
                    "smoothness.png",
                    "lens_light_nn_mge.png", "mock_table.md",
-                   "isophote_recovery.png", "coverage.png"):  # fmt: skip
+                   "isophote_recovery.png", "coverage.png", "chain_cost.png"):  # fmt: skip
         assert figure in html
     table3 = pd.read_csv(tmp_path / "results" / "summary" / "mock_table.csv")
     assert set(table3["parameter"]) == {
@@ -739,8 +748,8 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     counts = job_counts(after.stdout + after.stderr)
     assert counts == {
         "fit_quality": 1, "isophotes": 1, "overview": 1, "posterior": 1, "recovery": 1,
-        "recovery_table": 1, "coverage": 1, "mock_study": 1, "summary": 1, "all": 1,
-        "total": 10,
+        "recovery_table": 1, "coverage": 1, "mock_study": 1, "summary": 1, "chain_cost": 1,
+        "all": 1, "total": 11,
     }  # fmt: skip
 
 

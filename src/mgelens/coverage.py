@@ -19,7 +19,6 @@ Targets (:data:`TARGETS`): ≥ 95 % of the true γ, θ_E and shear components in
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -221,21 +220,3 @@ def target_counts(passed: pd.Series, goal: float) -> dict:
         "goal": goal,
         "met": bool(len(passed)) and fraction >= goal,
     }
-
-
-CHAIN_BENCHMARKS = ("sp", "spix1", "spix2", "light", "mass")
-"""Benchmark files (``results/<lens>/benchmarks/<phase>*.tsv``) whose wall-clock seconds
-make up a lens's chain: the five phases and every LIGHT candidate."""
-
-
-def chain_seconds(benchmark_folder) -> float:
-    """Wall-clock seconds of a lens's SLaM chain: the sum of the ``s`` column of its phase
-    benchmark files (Snakemake ``benchmark:``); NaN if there are none."""
-    files = [
-        path
-        for path in sorted(Path(benchmark_folder).glob("*.tsv"))
-        if path.stem.split("_")[0] in CHAIN_BENCHMARKS
-    ]
-    if not files:
-        return np.nan
-    return float(sum(pd.read_csv(path, sep="\t")["s"].sum() for path in files))

@@ -193,6 +193,34 @@ rule coverage:
         "--targets {output.targets:q} --figure {output.figure:q} > {log:q} 2>&1"
 
 
+rule chain_cost:
+    input:
+        chain_cost_inputs,
+    output:
+        table="results/summary/chain_cost.csv",
+        figure=report(
+            "results/summary/chain_cost.png",
+            caption="../report/chain_cost.rst",
+            category="Sample",
+        ),
+    log:
+        "logs/chain_cost.log",
+    benchmark:
+        "results/summary/benchmarks/chain_cost.tsv"
+    params:
+        mgelens_version=command_version("cost"),
+        cores=config["cost_cores"],
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens cost {input:q} --out {output.table:q} --figure {output.figure:q} "
+        "--cores {params.cores} > {log:q} 2>&1"
+
+
 rule smoothness:
     input:
         unpack(smoothness_inputs),

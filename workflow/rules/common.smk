@@ -290,6 +290,12 @@ def reference_tables() -> list[str]:
     return [str(REFERENCE_DIR / name) for name in REFERENCE_FILES if (REFERENCE_DIR / name).is_file()]
 
 
+def chain_cost_inputs(wildcards) -> list[str]:
+    """Every lens's MASS record: rule chain_cost reads the benchmark files and phase records
+    of the chains that made them (mgelens.chain_cost)."""
+    return [f"results/{lens}/mass/result.json" for lens in LENSES.index]
+
+
 def recovery_records(wildcards) -> list[str]:
     """Per-mock recovery records gathered into results/summary/recovery.csv."""
     return [f"results/{lens}/recovery.json" for lens in LENSES.index[LENSES["kind"] == "mock"]]
@@ -348,7 +354,8 @@ def mock_study_fits(wildcards) -> str:
 
 def all_targets() -> list[str]:
     """Default target: previews, overview and posterior figures, the sample summary and its figures
-    (which need every lens's SLaM chain, isophotes and quality record), and, if the sample
+    (which need every lens's SLaM chain, isophotes and quality record), what each chain
+    cost (rule chain_cost), and, if the sample
     has mocks, the table of their recovered truth and their posterior coverage and, if
     one of them is M1, the Appendix A smoothness scan."""
     targets = [f"results/{lens}/figures/preview.png" for lens in LENSES.index]
@@ -366,6 +373,8 @@ def all_targets() -> list[str]:
         "histograms.png",
         "einstein_radii.png",
         "residual_mosaic.png",
+        "chain_cost.csv",
+        "chain_cost.png",
     )
     return targets + [f"results/summary/{name}" for name in summary]
 

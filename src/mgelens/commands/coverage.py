@@ -11,7 +11,8 @@ Reads one recovery record per mock (``mgelens recovery``) and writes
 * ``--out``: per mass parameter, the fractions of truths inside the 1σ and 3σ intervals,
   the bias and scatter of median − truth and the median |pull|;
 * ``--rows``: one row per mock and parameter, with the wall-clock seconds of the mock's
-  SLaM chain (``chain_seconds``, from ``<record folder>/benchmarks/``);
+  SLaM chain (``chain_seconds``, :func:`mgelens.chain_cost.chain_seconds` of the record's
+  folder);
 * ``--targets``: each target's fraction, goal and whether it is met;
 * ``--figure``: the pulls per parameter, misses named, targets listed.
 
@@ -26,8 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from mgelens.atomic import atomic_path
+from mgelens.chain_cost import chain_seconds
 from mgelens.commands import make_output_folders
-from mgelens.coverage import chain_seconds, coverage_rows, coverage_table, target_table
+from mgelens.coverage import coverage_rows, coverage_table, target_table
 from mgelens.plot import save_png
 from mgelens.plot.coverage import coverage_figure
 
@@ -60,10 +62,10 @@ def run(args: argparse.Namespace) -> int:
         records = [json.loads(path.read_text()) for path in args.records]
         rows = coverage_rows(records)
         seconds = {
-            record["lens"]: chain_seconds(path.parent / "benchmarks")
+            record["lens"]: chain_seconds(path.parent)
             for record, path in zip(records, args.records, strict=True)
         }
-    except (OSError, json.JSONDecodeError, KeyError) as exc:
+    except (OSError, ValueError, KeyError) as exc:
         logger.error("cannot read the recovery records: %s", exc)
         return 1
     rows["chain_seconds"] = rows["lens"].map(seconds)
