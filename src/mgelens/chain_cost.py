@@ -25,7 +25,8 @@ BENCHMARK_COLUMNS = ("s", "cpu_time", "max_rss")
 """Columns of a Snakemake benchmark file that the costs read."""
 
 START_FILE = "start.json"
-"""SP's start record (:mod:`mgelens.pipeline.sp_start`), whose calls SP's job also made."""
+"""SP's start record (:mod:`mgelens.pipeline.sp_start`): its search's calls count among
+SP's (also where a rerun of SP reused the record instead of searching again)."""
 
 
 @dataclass(frozen=True)
