@@ -1,16 +1,20 @@
-"""What each lens's SLaM chain cost (issue #28): CPU and wall-clock time per phase from the
-rules' Snakemake ``benchmark:`` files, likelihood calls from the phases' records.
+"""What each lens's SLaM chain cost (issue #28): CPU and wall-clock seconds of its phase
+jobs from the rules' Snakemake ``benchmark:`` files, likelihood calls from the phases'
+records.
 
-A lens's folder ``results/<lens>/`` holds ``benchmarks/<phase>.tsv`` for every phase job
-(Snakemake's columns: ``s`` wall-clock seconds, ``cpu_time`` CPU seconds, ``max_rss`` MB,
-…) and ``<phase>/result.json`` with the sampler's ``n_calls``. The chain's phases are SP,
-SPix1, SPix2, every LIGHT candidate (``light_x6_point`` …, or ``light`` where the sheet
-pins the model) and MASS (:data:`CHAIN_PHASES`); rule ``choose_light``, the mock's
-simulation and the analysis rules are not part of it. A benchmark file records the last
-run of its job: a phase resumed after an interruption counts its last run only.
+A phase job's benchmark file ``results/<lens>/benchmarks/<job>.tsv`` (Snakemake's
+columns: ``s`` wall-clock seconds, ``cpu_time`` CPU seconds, ``max_rss`` MB, …) sits
+beside its folder ``results/<lens>/<job>/`` with ``result.json`` (the sampler's
+``n_calls``). A chain's jobs are SP, SPix1, SPix2, its LIGHT job (``light`` where the
+sheet pins the model, else every candidate ``light_x6_point`` …) and MASS
+(:data:`CHAIN_PHASES`); the workflow passes exactly those (rule ``chain_cost``), so files
+left from another configuration do not count. A benchmark file records the last run of
+its job: a phase resumed after an interruption counts that run's time only, while its
+sampler's calls include the runs before (they are checkpointed).
 """
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,15 +22,17 @@ import numpy as np
 import pandas as pd
 
 CHAIN_PHASES = ("sp", "spix1", "spix2", "light", "mass")
-"""The SLaM phases, in order; a benchmark file ``<phase>*.tsv`` whose stem starts with one
-of them (before any ``_``) belongs to it (``light_x6_point`` to ``light``)."""
+"""The SLaM phases, in order; a job whose name starts with one of them (before any
+``_``) belongs to it (``light_x6_point`` to ``light``)."""
 
 BENCHMARK_COLUMNS = ("s", "cpu_time", "max_rss")
-"""Columns of a Snakemake benchmark file that the costs read."""
+"""Columns of a Snakemake benchmark file that the costs read (Snakemake writes NA where it
+could not sample the process: a job shorter than its first sample)."""
 
 START_FILE = "start.json"
-"""SP's start record (:mod:`mgelens.pipeline.sp_start`): its search's calls count among
-SP's (also where a rerun of SP reused the record instead of searching again)."""
+"""SP's start record (:mod:`mgelens.pipeline.sp_start`): where SP's record says it started
+from the search (``sp_start: search``), the search's calls count among SP's (also where
+a rerun of SP reused the record instead of searching again)."""
 
 
 @dataclass(frozen=True)
@@ -35,19 +41,22 @@ class JobCost:
 
     Attributes
     ----------
+    lens : str
+        The lens folder's name.
     job : str
         The benchmark file's stem: the phase's folder (``sp``, ``light_x6_point`` …).
     phase : str
         Its phase (:data:`CHAIN_PHASES`).
     wall_s, cpu_s : float
-        Wall-clock and CPU seconds (``s``, ``cpu_time``).
+        Wall-clock and CPU seconds (``s``, ``cpu_time``; NaN where Snakemake wrote NA).
     max_rss_mb : float
-        Peak resident memory (MB).
+        Peak resident memory (MB; NaN where Snakemake wrote NA).
     calls : float
         Likelihood calls of its sampler, and for SP of its start search; NaN where the
         phase's ``result.json`` is absent.
     """
 
+    lens: str
     job: str
     phase: str
     wall_s: float
@@ -62,77 +71,91 @@ def phase_of(job: str) -> str | None:
     return phase if phase in CHAIN_PHASES else None
 
 
-def _benchmark(path: Path) -> dict[str, float]:
-    """Sums of :data:`BENCHMARK_COLUMNS` (max for ``max_rss``) over the rows of one
-    benchmark file (one row per repeat)."""
+def _benchmark(path: Path, columns: Sequence[str]) -> pd.DataFrame:
+    """``columns`` of one benchmark file as numbers (one row per repeat; NA → NaN)."""
+    fix = "delete it and rerun its phase to measure it again"
     try:
         table = pd.read_csv(path, sep="\t")
     except (OSError, ValueError) as error:
-        raise ValueError(f"{path}: not a Snakemake benchmark file ({error})") from error
-    missing = [name for name in BENCHMARK_COLUMNS if name not in table.columns]
+        raise ValueError(f"{path}: not a Snakemake benchmark file ({error}); {fix}") from error
+    missing = [name for name in columns if name not in table.columns]
     if missing or table.empty:
         raise ValueError(
             f"{path}: a Snakemake benchmark file needs a row with columns "
-            f"{', '.join(BENCHMARK_COLUMNS)} (missing: {', '.join(missing) or 'rows'}); "
-            "delete it and rerun the phase to record it again"
+            f"{', '.join(columns)} (missing: {', '.join(missing) or 'rows'}); {fix}"
         )
-    values = table[list(BENCHMARK_COLUMNS)].apply(pd.to_numeric, errors="coerce")
-    return {
-        "s": float(values["s"].sum()),
-        "cpu_time": float(values["cpu_time"].sum()),
-        "max_rss": float(values["max_rss"].max()),
-    }
+    return table[list(columns)].apply(pd.to_numeric, errors="coerce")
+
+
+def _read_json(path: Path, job: str) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: cannot be read ({error}); rerun phase {job}") from error
 
 
 def _calls(lens_folder: Path, job: str) -> float:
-    """Sampler calls in ``<job>/result.json`` (plus SP's start search); NaN without it."""
-    record = lens_folder / job / "result.json"
-    if not record.is_file():
+    """Sampler calls in ``<job>/result.json`` (plus SP's start search, :data:`START_FILE`);
+    NaN without the record."""
+    path = lens_folder / job / "result.json"
+    if not path.is_file():
         return np.nan
+    record = _read_json(path, job)
     try:
-        calls = float(json.loads(record.read_text())["sampler"]["n_calls"])
-        start = lens_folder / job / START_FILE
-        if job == "sp" and start.is_file():
-            calls += float(json.loads(start.read_text())["start"]["n_calls"])
-    except (json.JSONDecodeError, KeyError, TypeError) as error:
-        raise ValueError(f"{record}: no sampler calls to read ({error!r})") from error
+        calls = float(record["sampler"]["n_calls"])
+        searched = record["settings"]["slam"].get("sp_start") == "search"
+    except (KeyError, TypeError, ValueError, AttributeError) as error:
+        raise ValueError(
+            f"{path}: no sampler calls or settings to read ({error!r}); rerun phase {job}"
+        ) from error
+    start = lens_folder / job / START_FILE
+    if job == "sp" and searched and start.is_file():
+        try:
+            calls += float(_read_json(start, job)["start"]["n_calls"])
+        except (KeyError, TypeError, ValueError) as error:
+            raise ValueError(
+                f"{start}: no start-search calls to read ({error!r}); delete it and rerun phase sp"
+            ) from error
     return calls
 
 
-def job_costs(lens_folder: Path) -> list[JobCost]:
-    """The chain's jobs of one lens folder (``results/<lens>``) with a benchmark file, in
-    the order of :data:`CHAIN_PHASES`, then by name.
+def job_cost(benchmark: Path) -> JobCost:
+    """The cost of the phase job whose benchmark file is ``benchmark``
+    (``results/<lens>/benchmarks/<job>.tsv``).
 
     Raises
     ------
     ValueError
-        For a benchmark file or a phase record that cannot be read, naming it.
+        For a job outside the chain, or a benchmark file or phase record that cannot be
+        read, naming the file and the fix.
     """
-    lens_folder = Path(lens_folder)
-    costs = []
-    for path in sorted((lens_folder / "benchmarks").glob("*.tsv")):
-        phase = phase_of(path.stem)
-        if phase is None:
-            continue
-        measured = _benchmark(path)
-        costs.append(
-            JobCost(
-                path.stem,
-                phase,
-                measured["s"],
-                measured["cpu_time"],
-                measured["max_rss"],
-                _calls(lens_folder, path.stem),
-            )
+    benchmark = Path(benchmark)
+    phase = phase_of(benchmark.stem)
+    if phase is None:
+        raise ValueError(
+            f"{benchmark}: not a benchmark file of a SLaM phase job (its name must start "
+            f"with one of {', '.join(CHAIN_PHASES)})"
         )
-    return sorted(costs, key=lambda cost: (CHAIN_PHASES.index(cost.phase), cost.job))
+    values = _benchmark(benchmark, BENCHMARK_COLUMNS)
+    lens_folder = benchmark.parent.parent
+    return JobCost(
+        lens_folder.name,
+        benchmark.stem,
+        phase,
+        float(values["s"].sum(min_count=1)),
+        float(values["cpu_time"].sum(min_count=1)),
+        float(values["max_rss"].max()),
+        _calls(lens_folder, benchmark.stem),
+    )
 
 
 def chain_seconds(lens_folder: Path) -> float:
-    """Wall-clock seconds of a lens's chain (the sum over :func:`job_costs`); NaN with no
-    benchmark file."""
-    costs = job_costs(lens_folder)
-    return float(sum(cost.wall_s for cost in costs)) if costs else np.nan
+    """Wall-clock seconds of a lens's chain: the ``s`` column summed over every benchmark
+    file of a phase job in ``lens_folder/benchmarks/`` (other jobs left out); NaN with
+    none."""
+    files = sorted(Path(lens_folder, "benchmarks").glob("*.tsv"))
+    seconds = [_benchmark(path, ("s",))["s"].sum() for path in files if phase_of(path.stem)]
+    return float(sum(seconds)) if seconds else np.nan
 
 
 COST_COLUMNS = (
@@ -145,29 +168,39 @@ COST_COLUMNS = (
     "complete",
 )
 """Columns of :func:`cost_table`: per phase its CPU seconds and likelihood calls (a phase
-with several jobs, the LIGHT candidates, sums them; NaN for a phase without a benchmark
-file), the chain's CPU and wall-clock minutes over the jobs found, the largest peak
-memory, and whether every phase has a benchmark file."""
+with several jobs, the LIGHT candidates, sums them; NaN for a phase without a job or with
+an unmeasured one), the chain's CPU and wall-clock minutes (NaN if a job's are
+unmeasured), the largest peak memory, and whether every phase has a job with its CPU time
+measured."""
 
 
-def cost_row(lens: str, costs: list[JobCost]) -> dict:
-    """One row of :func:`cost_table` from one lens's :func:`job_costs`."""
+def _total(values: Sequence[float]) -> float:
+    """Sum of ``values``; NaN if there are none or one is NaN."""
+    return float(np.sum(values)) if len(values) else np.nan
+
+
+def cost_row(lens: str, costs: Sequence[JobCost]) -> dict:
+    """One row of :func:`cost_table` from one lens's jobs (:func:`job_cost`)."""
     row: dict = {"lens": lens}
     for phase in CHAIN_PHASES:
         jobs = [cost for cost in costs if cost.phase == phase]
-        row[f"{phase}_cpu_s"] = sum(cost.cpu_s for cost in jobs) if jobs else np.nan
-        row[f"{phase}_calls"] = sum(cost.calls for cost in jobs) if jobs else np.nan
-    row["chain_cpu_min"] = sum(cost.cpu_s for cost in costs) / 60.0 if costs else np.nan
-    row["chain_wall_min"] = sum(cost.wall_s for cost in costs) / 60.0 if costs else np.nan
-    row["max_rss_mb"] = max((cost.max_rss_mb for cost in costs), default=np.nan)
-    row["complete"] = all(any(c.phase == phase for c in costs) for phase in CHAIN_PHASES)
+        row[f"{phase}_cpu_s"] = _total([cost.cpu_s for cost in jobs])
+        row[f"{phase}_calls"] = _total([cost.calls for cost in jobs])
+    row["chain_cpu_min"] = _total([cost.cpu_s for cost in costs]) / 60.0
+    row["chain_wall_min"] = _total([cost.wall_s for cost in costs]) / 60.0
+    memory = [cost.max_rss_mb for cost in costs if np.isfinite(cost.max_rss_mb)]
+    row["max_rss_mb"] = max(memory, default=np.nan)
+    row["complete"] = all(np.isfinite(row[f"{phase}_cpu_s"]) for phase in CHAIN_PHASES)
     return row
 
 
-def cost_table(lens_folders: list[Path]) -> pd.DataFrame:
-    """One row per lens folder (``results/<lens>``, named by the folder), columns
-    :data:`COST_COLUMNS`."""
-    rows = [cost_row(Path(folder).name, job_costs(Path(folder))) for folder in lens_folders]
+def cost_table(benchmarks: Sequence[Path]) -> pd.DataFrame:
+    """One row per lens (benchmark files ``results/<lens>/benchmarks/<job>.tsv`` grouped
+    by lens folder, in the order of their first file), columns :data:`COST_COLUMNS`."""
+    jobs: dict[Path, list[JobCost]] = {}
+    for path in benchmarks:
+        jobs.setdefault(Path(path).parent.parent, []).append(job_cost(Path(path)))
+    rows = [cost_row(folder.name, costs) for folder, costs in jobs.items()]
     return pd.DataFrame(rows, columns=list(COST_COLUMNS))
 
 

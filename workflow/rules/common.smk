@@ -291,9 +291,16 @@ def reference_tables() -> list[str]:
 
 
 def chain_cost_inputs(wildcards) -> list[str]:
-    """Every lens's MASS record: rule chain_cost reads the benchmark files and phase records
-    of the chains that made them (mgelens.chain_cost)."""
-    return [f"results/{lens}/mass/result.json" for lens in LENSES.index]
+    """The benchmark files of every lens's chain jobs (SP, SPix1, SPix2, its LIGHT job or
+    candidates, MASS) that the chain_cost step sums (mgelens.chain_cost), for the
+    sheet's current LIGHT models only, not files left from another configuration."""
+    files = []
+    for lens in LENSES.index:
+        models = lens_light_models(lens)
+        light = ["light"] if len(models) == 1 else [model.folder for model in models]
+        jobs = ["sp", "spix1", "spix2", *light, "mass"]
+        files += [f"results/{lens}/benchmarks/{job}.tsv" for job in jobs]
+    return files
 
 
 def recovery_records(wildcards) -> list[str]:

@@ -2,11 +2,13 @@
 
 Example::
 
-    mgelens cost results/*/mass/result.json --out results/summary/chain_cost.csv \\
-        --figure results/summary/chain_cost.png --cores 2
+    mgelens cost results/M1/benchmarks/{sp,spix1,spix2,light,mass}.tsv \\
+        --out results/summary/chain_cost.csv --figure results/summary/chain_cost.png
 
-Reads, for each MASS record ``results/<lens>/mass/result.json``, the lens folder's
-Snakemake benchmark files (``results/<lens>/benchmarks/``) and phase records, and writes
+Reads the Snakemake benchmark files of the chain's phase jobs
+(``results/<lens>/benchmarks/<job>.tsv``; rule ``chain_cost`` passes every lens's SP,
+SPix1, SPix2, LIGHT job or candidates and MASS) and each job's ``results/<lens>/<job>/``
+record for its likelihood calls, and writes
 
 * ``--out``: one row per lens, CPU seconds and likelihood calls per phase, the chain's
   CPU and wall-clock minutes, peak memory, and whether every phase was measured;
@@ -37,7 +39,7 @@ def register(subparsers) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("records", type=Path, nargs="+", metavar="MASS_RESULT.json")
+    parser.add_argument("benchmarks", type=Path, nargs="+", metavar="BENCHMARK.tsv")
     parser.add_argument("--out", type=Path, required=True, help="per-lens table (CSV)")
     parser.add_argument("--figure", type=Path, required=True, help="cost figure (PNG)")
     parser.add_argument(
@@ -54,14 +56,14 @@ def run(args: argparse.Namespace) -> int:
         if args.cores < 1:
             raise ValueError(f"--cores must be at least 1, got {args.cores}")
         make_output_folders(args.out, args.figure)
-        table = cost_table([path.parent.parent for path in args.records])
+        table = cost_table(args.benchmarks)
+        sample = sample_cost(table, args.cores)
+        with atomic_path(args.out) as temporary:
+            table.to_csv(temporary, index=False)
+        save_png(cost_figure(table, sample), args.figure)
     except (OSError, ValueError) as error:
         logger.error("cost: %s", error)
         return 1
-    sample = sample_cost(table, args.cores)
-    with atomic_path(args.out) as temporary:
-        table.to_csv(temporary, index=False)
-    save_png(cost_figure(table, sample), args.figure)
     print(table.to_string(index=False, float_format=lambda v: f"{v:.1f}"))
     for name, value in sample.items():
         print(f"{name}: {value:.2f}" if isinstance(value, float) else f"{name}: {value}")
