@@ -22,7 +22,7 @@ LAYERS = (
                   "independent_mock", "ellipse_fit", "isophotes", "source_share",
                   "isophote_recovery", "recovery", "coverage", "quality",
                   "image_multiplicity", "overview", "summary",
-                  "published", "mock_study", "smoothness")),
+                  "published", "mock_study", "smoothness", "chain_cost")),
     ("plot", ("plot",)),
     ("commands", ("commands", "cli", "__main__")),
 )  # fmt: skip
