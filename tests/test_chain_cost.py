@@ -85,6 +85,9 @@ def test_repeats_add_up_and_a_missing_record_leaves_the_calls_unknown(tmp_path):
     cost = job_cost(path)
     assert (cost.wall_s, cost.cpu_s, cost.max_rss_mb) == (22.0, 20.0, 250.0)
     assert np.isnan(cost.calls)
+    (tmp_path / "L2" / "spix1").mkdir()
+    (tmp_path / "L2" / "spix1" / "result.json").write_text('{"sampler": {"n_calls": 7}}')
+    assert job_cost(path).calls == 7  # only SP's record needs its settings
 
 
 def test_an_unmeasured_or_missing_phase_makes_the_chain_incomplete(tmp_path):

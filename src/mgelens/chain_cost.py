@@ -103,13 +103,13 @@ def _calls(lens_folder: Path, job: str) -> float:
     record = _read_json(path, job)
     try:
         calls = float(record["sampler"]["n_calls"])
-        searched = record["settings"]["slam"].get("sp_start") == "search"
-    except (KeyError, TypeError, ValueError, AttributeError) as error:
+        searched = job == "sp" and record["settings"]["slam"]["sp_start"] == "search"
+    except (KeyError, TypeError, ValueError) as error:
         raise ValueError(
-            f"{path}: no sampler calls or settings to read ({error!r}); rerun phase {job}"
+            f"{path}: no sampler calls or SP start setting to read ({error!r}); rerun phase {job}"
         ) from error
     start = lens_folder / job / START_FILE
-    if job == "sp" and searched and start.is_file():
+    if searched and start.is_file():
         try:
             calls += float(_read_json(start, job)["start"]["n_calls"])
         except (KeyError, TypeError, ValueError) as error:
