@@ -21,6 +21,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from mgelens.pipeline.sp_start import START_FILE
+from mgelens.search.results import RESULT_FILE
+
 CHAIN_PHASES = ("sp", "spix1", "spix2", "light", "mass")
 """The SLaM phases, in order; a job whose name starts with one of them (before any
 ``_``) belongs to it (``light_x6_point`` to ``light``)."""
@@ -28,11 +31,6 @@ CHAIN_PHASES = ("sp", "spix1", "spix2", "light", "mass")
 BENCHMARK_COLUMNS = ("s", "cpu_time", "max_rss")
 """Columns of a Snakemake benchmark file that the costs read (Snakemake writes NA where it
 could not sample the process: a job shorter than its first sample)."""
-
-START_FILE = "start.json"
-"""SP's start record (:mod:`mgelens.pipeline.sp_start`): where SP's record says it started
-from the search (``sp_start: search``), the search's calls count among SP's (also where
-a rerun of SP reused the record instead of searching again)."""
 
 
 @dataclass(frozen=True)
@@ -95,9 +93,11 @@ def _read_json(path: Path, job: str) -> dict:
 
 
 def _calls(lens_folder: Path, job: str) -> float:
-    """Sampler calls in ``<job>/result.json`` (plus SP's start search, :data:`START_FILE`);
-    NaN without the record."""
-    path = lens_folder / job / "result.json"
+    """Sampler calls in ``<job>/result.json``; NaN without the record. Where SP's record
+    says it started from the search (``sp_start: search``), the calls of its start record
+    (:data:`~mgelens.pipeline.sp_start.START_FILE`) count among SP's, also where a rerun of
+    SP reused the record instead of searching again."""
+    path = lens_folder / job / RESULT_FILE
     if not path.is_file():
         return np.nan
     record = _read_json(path, job)

@@ -53,8 +53,6 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        if args.cores < 1:
-            raise ValueError(f"--cores must be at least 1, got {args.cores}")
         make_output_folders(args.out, args.figure)
         table = cost_table(args.benchmarks)
         sample = sample_cost(table, args.cores)
