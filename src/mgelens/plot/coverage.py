@@ -12,6 +12,9 @@ from mgelens.coverage import PARAMETERS, interval_pulls
 PULL_LIMIT = 10.0
 """Pulls beyond ±this are drawn at the limit (with a triangle) so the bulk stays legible."""
 
+LABEL_STEP_POINTS = 8.0
+"""Vertical step (points) between the names of misses drawn at the same limit."""
+
 LABELS = {
     "mass.centre_x": "x",
     "mass.centre_y": "y",
@@ -59,11 +62,17 @@ def coverage_figure(rows: pd.DataFrame, targets: pd.DataFrame, title: str = "") 
         for mask, colour in ((~missed, "tab:blue"), (missed, "tab:red")):
             ax.scatter(x[mask & ~clipped], shown[mask & ~clipped], s=14, color=colour)
             ax.scatter(x[mask & clipped], shown[mask & clipped], s=30, marker="^", color=colour)
-        for xi, yi, lens in zip(x[missed], shown[missed], part["lens"][missed], strict=True):
+        stacked = {-1.0: 0, 1.0: 0}
+        for xi, yi, lens, beyond in zip(
+            x[missed], shown[missed], part["lens"][missed], clipped[missed], strict=True
+        ):
+            # names of misses clipped at the same limit are stacked toward the axis centre
+            rank = stacked[np.sign(yi)] if beyond else 0
+            stacked[np.sign(yi)] += int(beyond)
             ax.annotate(
                 lens,
                 (xi, yi),
-                xytext=(5, 3),
+                xytext=(5, 3 - np.sign(yi) * LABEL_STEP_POINTS * rank),
                 textcoords="offset points",
                 fontsize="x-small",
                 color="tab:red",
