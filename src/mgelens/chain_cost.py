@@ -110,8 +110,9 @@ def _calls(lens_folder: Path, job: str) -> float:
         ) from error
     start = lens_folder / job / START_FILE
     if searched and start.is_file():
+        start_record = _read_json(start, job)
         try:
-            calls += float(_read_json(start, job)["start"]["n_calls"])
+            calls += float(start_record["start"]["n_calls"])
         except (KeyError, TypeError, ValueError) as error:
             raise ValueError(
                 f"{start}: no start-search calls to read ({error!r}); delete it and rerun phase sp"
