@@ -2,12 +2,14 @@
 second basin, the re-centred priors, the record's reuse, and where MASS takes its image
 positions from."""
 
+import dataclasses
+import json
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from mgelens.pipeline import mass_rescan, models
+from mgelens.pipeline import mass_rescan, models, sp_start
 from mgelens.pipeline.problem import positions_penalty
 from mgelens.pipeline.settings import profile_settings, settings_from_mapping
 from mgelens.search.model import ParameterSpace
@@ -48,9 +50,10 @@ def spix1_space() -> ParameterSpace:
     return ParameterSpace.from_priors(priors)
 
 
-def basin(space, x, centre: dict, height: float) -> float:
+def basin(space, x, centre: dict, height: float, scale: float = 1.0) -> float:
+    """ln ε of a Gaussian basin at ``centre``, :data:`WIDTHS` times ``scale`` wide."""
     values = space.values(x)
-    chi = [(values[n] - centre[n]) / WIDTHS.get(n.split(".")[1], 0.03) for n in centre]
+    chi = [(values[n] - centre[n]) / (scale * WIDTHS.get(n.split(".")[1], 0.03)) for n in centre]
     coefficient = (np.log10(values["regularization.coefficient"]) - 1.0) ** 2
     return height - 0.5 * float(np.sum(np.square(chi))) - coefficient
 
@@ -177,3 +180,149 @@ def test_the_quick_profile_rescans_and_the_paper_profile_does_not():
     assert profile_settings("paper").spix1_rescan is False
     with pytest.raises(ValueError, match=r"slam\.spix1_rescan"):
         settings_from_mapping({"spix1_rescan": "yes please"})
+
+
+PASSED_WIDTHS = {"centre": 0.05, "ell_comps": 0.2, "gamma": 0.05}
+"""SLaM's width modifiers (SPEC §8.2; θ_E 25 %): SPix1's passed priors around SP's mass."""
+LIGHT_SHAPED = {
+    **SP_MASS,
+    "mass.centre_x": 0.2,
+    "mass.ell_comps_1": -0.05,
+    "mass.einstein_radius": 1.43,
+    "shear.gamma_1": -0.1,
+}
+"""P18's case: a basin at SP's θ_E (so the θ_E scan, which holds SP's centre and shear,
+does not see it) 4 passed widths away in the centre and 2 in the shear."""
+
+
+def passed_space() -> ParameterSpace:
+    """SPix1's free parameters with the passed widths of :data:`PASSED_WIDTHS` around
+    :data:`SP_MASS`."""
+    priors = {}
+    for name, value in SP_MASS.items():
+        if name.endswith("radius"):
+            priors[name] = TruncatedGaussian(value, 0.25 * value, 0.0, np.inf)
+            continue
+        width = next(w for key, w in PASSED_WIDTHS.items() if key in name)
+        priors[name] = TruncatedGaussian(value, width, -np.inf, np.inf)
+    priors["regularization.coefficient"] = LogUniform(1e-6, 1e6)
+    return ParameterSpace.from_priors(priors)
+
+
+def sp_and_light_shaped(space, height: float):
+    """ln ε: SP's basin and the light-shaped one, each a fifth of :data:`WIDTHS` wide."""
+
+    def likelihood(x):
+        return max(basin(space, x, SP_MASS, 0.0, 0.2), basin(space, x, LIGHT_SHAPED, height, 0.2))
+
+    return likelihood
+
+
+def offset(point: dict, by: float) -> dict:
+    """``point`` with every mass and shear value moved by ``by`` (a polish's imprecision)."""
+    return {name: value + by for name, value in point.items()}
+
+
+def test_a_start_polish_outside_sps_basin_recentres_the_priors_on_it():
+    """SP chose the arcs' start; its light-shaped polish lies in a basin SPix1 prefers by
+    300 that no θ_E scan reaches. Its other unchosen polish, inside SP's basin, counts for
+    nothing."""
+    space = passed_space()
+    inside = offset(SP_MASS, 0.002)
+    found = mass_rescan.rescan(
+        space,
+        sp_and_light_shaped(space, 300.0),
+        (0.0, 0.0),
+        start_points=[offset(LIGHT_SHAPED, 0.004), inside],
+    )
+    assert found.far_log_posterior < found.near_log_posterior  # the scan saw nothing
+    assert found.start_widths[0] == pytest.approx(
+        mass_rescan.widths_from_sp(space, space.vector({**inside, **LIGHT_SHAPED,
+                                                        "regularization.coefficient": 1.0})),
+        abs=0.3,
+    )  # fmt: skip
+    assert found.start_widths[0] > 4.0
+    assert found.start_widths[1] < 0.2
+    assert found.start_log_posteriors[0] > found.near_log_posterior + 250
+    assert found.polished_start > found.near_log_posterior + 290
+    assert found.polished_near_einstein_radius == pytest.approx(1.45, abs=0.002)
+    assert found.polished_start - found.polished_near == pytest.approx(300.0 - 10.1, abs=1.0)
+    assert found.polished_far is None
+    assert found.moved
+    for name, value in LIGHT_SHAPED.items():
+        assert found.values[name] == pytest.approx(value, abs=0.01), name
+    recentred = mass_rescan.recentred_space(space, found)
+    assert recentred.parameter("mass.centre_x").prior.mean == pytest.approx(0.2, abs=0.01)
+    assert recentred.parameter("mass.centre_x").prior.sigma == PASSED_WIDTHS["centre"]
+
+
+@pytest.mark.parametrize("height", [40.0, 300.0])
+def test_a_start_polish_needs_the_threshold_and_several_images(height):
+    space = passed_space()
+    asked = []
+
+    def lensing(values):
+        asked.append(values["mass.centre_x"])
+        return False
+
+    found = mass_rescan.rescan(
+        space,
+        sp_and_light_shaped(space, height),
+        (0.0, 0.0),
+        lensing,
+        start_points=[LIGHT_SHAPED],
+    )
+    assert not found.moved
+    coefficient = {"regularization.coefficient": 1.0}
+    prior = space.log_prior(space.vector(LIGHT_SHAPED | coefficient)) - space.log_prior(
+        space.vector(SP_MASS | coefficient)
+    )
+    assert prior == pytest.approx(-0.5 * (4.0**2 + 2.0**2 + 0.5**2 + (0.02 / 0.3625) ** 2))
+    assert found.start_log_posteriors[0] == pytest.approx(
+        found.near_log_posterior + height + prior, abs=0.1
+    )
+    if height < mass_rescan.THRESHOLD:
+        assert found.polished_start is None
+        assert asked == []
+    else:
+        assert asked == [pytest.approx(0.2, abs=0.01)]
+
+
+def test_a_better_start_polish_within_sps_basin_moves_nothing():
+    """P17's case: SP's chosen polish scored 121 above SP's posterior medians in SPix1,
+    0.3 passed widths from them; SPix1 samples it within its priors anyway."""
+    space = passed_space()
+    own_peak = {**SP_MASS, "shear.gamma_1": 0.015}
+
+    def likelihood(x):
+        values = space.values(x)
+        return basin(space, x, SP_MASS, 0.0) + 0.5 * ((values["shear.gamma_1"] / 0.03) ** 2 - (
+            (values["shear.gamma_1"] - 0.015) / 0.001) ** 2)  # fmt: skip
+
+    found = mass_rescan.rescan(space, likelihood, (0.0, 0.0), start_points=[own_peak])
+    assert found.start_widths[0] == pytest.approx(0.3, abs=0.01)
+    assert found.start_log_posteriors[0] > found.near_log_posterior + 100
+    assert found.polished_start is None
+    assert not found.moved
+
+
+def test_sp_start_records_keep_every_polish_and_name_the_unchosen(tmp_path):
+    polishes = tuple({"values": {"mass.einstein_radius": r}, "log_posterior": v}
+                     for r, v in ((1.08, 3221.2), (1.03, 2443.4), (1.034, 2841.0)))  # fmt: skip
+    start = sp_start.SPStart({"mass.einstein_radius": 1.08}, 3221.2, -4e5, None, 1538, 9440,
+                             119.0, polishes=polishes)  # fmt: skip
+    assert start.chosen == 0
+    path = tmp_path / sp_start.START_FILE
+    path.write_text(json.dumps({"start": start.to_dict(), "fingerprint": {}}))
+    assert sp_start.unchosen_polishes(path) == [{"mass.einstein_radius": 1.03},
+                                                {"mass.einstein_radius": 1.034}]  # fmt: skip
+    scanned = dataclasses.replace(start, light_shaped_mass=True, scanned_mass=True)
+    assert scanned.chosen == 2
+    assert [p["mass.einstein_radius"] for p in scanned.unchosen_polishes()] == [1.08, 1.03]
+    older = {k: v for k, v in start.to_dict().items() if k != "polishes"}
+    path.write_text(json.dumps({"start": older}))
+    assert sp_start.unchosen_polishes(path) == []
+    assert sp_start.unchosen_polishes(tmp_path / "absent.json") == []
+    path.write_text("{")
+    with pytest.raises(ValueError, match="delete it and rerun phase 'sp'"):
+        sp_start.unchosen_polishes(path)

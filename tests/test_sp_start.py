@@ -561,10 +561,13 @@ def test_the_start_with_the_higher_polished_posterior_wins(monkeypatch, values, 
 
     monkeypatch.setattr(sp_start, "polish", polish)
     posterior = sp_start._Posterior(lambda x: 0.0, MASS_SPACE)
-    x, value, held, index = sp_start.polish_starts(
+    (x, value, held, index), polished = sp_start.polish_starts(
         posterior, starts, MASS_SPACE.free_names, (0.0, 0.0)
     )
     assert held_near == [1.7, 1.7, 1.0]
+    assert [p["log_posterior"] for p in polished] == list(values)
+    for record, (start, _) in zip(polished, starts, strict=True):
+        assert list(record["values"].values()) == pytest.approx(start + 0.01)
     assert index == chosen
     assert value == values[chosen]
     assert held is (chosen == 0)

@@ -26,6 +26,19 @@ Before SPix1 samples (``slam.spix1_rescan``, the quick profile):
    :data:`THRESHOLD`, SPix1's mass and shear priors are re-centred on that point, their
    widths as passed (SPEC §8.2).
 
+5. Where the scan kept SP's basin, SP's start's other polished points (those SP did not
+   start from, :attr:`~mgelens.pipeline.sp_start.SPStart.polishes`) are scored (the
+   coefficient chosen on the grid, about 17 calls each). SP's parametric source can
+   prefer a wrong mass that its pixelized counterpart does not: on the coverage study's
+   P18 SP chose the arcs' SIE + shear (shear 0.15 for a true 0.03) at SPix1's ln P
+   15,026, where its light-shaped polishes score 22,901 and 23,710 (docs/coverage.md).
+   A point counts if it lies more than :data:`BASIN_WIDTHS` of SPix1's passed prior
+   widths from their means (SP's posterior; :func:`widths_from_sp`), since within them
+   SPix1 samples it anyway. If the best such point beats ``near`` by :data:`THRESHOLD`,
+   it and ``near`` are polished as in 4, and SPix1's priors are re-centred on the
+   polished point if it still lies beyond :data:`BASIN_WIDTHS` and beats the polished
+   ``near`` by :data:`THRESHOLD`.
+
 ln P is the phase's ln ε (positions penalty included) plus its ln prior. The outcome is
 recorded in ``spix1/rescan.json`` and read back for the same inputs and settings.
 """
@@ -33,7 +46,7 @@ recorded in ``spix1/rescan.json`` and read back for the same inputs and settings
 import dataclasses
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +75,11 @@ POLISH_CALLS = 1500
 """Evaluations of each polish."""
 COEFFICIENT_GRID = 10.0 ** np.arange(-3.0, 5.01, 0.5)
 """Regularization coefficients tried at each point the rescan compares."""
+BASIN_WIDTHS = 1.0
+"""Standardised distance (in SPix1's passed prior widths) beyond which one of SP's start's
+polished points lies outside SP's basin (step 5). On P17 the best of them lay 0.3 widths
+from SP's posterior and scored 121 above it in SPix1 (the same basin, SP's posterior medians
+not SPix1's maximum); on P18 and P21 the light-shaped polishes lay several widths away."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,19 +95,29 @@ class Rescan:
     near_log_posterior, far_log_posterior : float
         Their ln P.
     polished_near_einstein_radius, polished_near : float or None
-        θ_E (arcsec) and ln P where the polish from ``near`` ended (``None`` when the scan
-        did not call for the polishes).
+        θ_E (arcsec) and ln P where the polish from ``near`` ended (``None`` when neither
+        the scan nor step 5 called for the polishes).
     polished_far_einstein_radius, polished_far : float or None
-        The same for the polish from ``far``.
+        The same for the polish from ``far`` (the scan's only).
     values : dict or None
         The free values that SPix1's priors were re-centred on, else ``None``: the better
         of the polished points beyond :data:`NEAR` of SP's θ_E, if it beats SP's basin
         (the best polished point within :data:`NEAR`, else ``near``) by
-        :data:`THRESHOLD`.
+        :data:`THRESHOLD`; or the polished start point of step 5.
     n_calls : int
         Likelihood evaluations.
     seconds : float
         Wall-clock time.
+    start_log_posteriors : list of float
+        ln P of SP's start's unchosen polished points (step 5; empty where the scan moved
+        or the start kept none).
+    start_widths : list of float
+        Their distances from SP's posterior in passed prior widths.
+    polished_start_einstein_radius, polished_start : float or None
+        θ_E (arcsec) and ln P where the polish from the best of them ended (``None`` when
+        step 5 did not call for it).
+    polished_start_widths : float or None
+        That point's distance from SP's posterior in passed prior widths.
     """
 
     reference_einstein_radius: float
@@ -104,6 +132,11 @@ class Rescan:
     values: dict | None
     n_calls: int
     seconds: float
+    start_log_posteriors: tuple[float, ...] = ()
+    start_widths: tuple[float, ...] = ()
+    polished_start_einstein_radius: float | None = None
+    polished_start: float | None = None
+    polished_start_widths: float | None = None
 
     @property
     def moved(self) -> bool:
@@ -112,6 +145,11 @@ class Rescan:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, content: dict) -> "Rescan":
+        lists = ("start_log_posteriors", "start_widths")
+        return cls(**{**content, **{k: tuple(content.get(k, ())) for k in lists}})
 
 
 def _with_best_coefficient(posterior: sp_start._Posterior, x: np.ndarray) -> np.ndarray:
@@ -158,15 +196,48 @@ def _polish(
     return x, posterior(x)
 
 
+def widths_from_sp(space: ParameterSpace, x: np.ndarray) -> float:
+    """Distance of the free vector ``x`` from the means of ``space``'s passed mass and shear
+    priors (SP's posterior in SPix1's problem), in their widths: √Σ((x − mean)/sigma)²
+    over the passed (truncated-Gaussian) priors of :data:`models.PASSED_MASS_NAMES`."""
+    terms = [
+        ((x[i] - prior.mean) / prior.sigma) ** 2
+        for i, name in enumerate(space.free_names)
+        if name in models.PASSED_MASS_NAMES
+        and isinstance(prior := space.parameter(name).prior, TruncatedGaussian)
+    ]
+    return float(np.sqrt(sum(terms)))
+
+
+def _with_values(space: ParameterSpace, x: np.ndarray, values: dict) -> np.ndarray:
+    """``x`` with its passed mass and shear parameters taken from ``values`` (where there)."""
+    x = x.copy()
+    for i, name in enumerate(space.free_names):
+        if name in models.PASSED_MASS_NAMES and name in values:
+            x[i] = values[name]
+    return x
+
+
+def _lensed(space: ParameterSpace, x: np.ndarray, lensing) -> dict | None:
+    """The free values of ``x`` if ``lensing`` (when given) accepts them, else ``None``."""
+    values = dict(zip(space.free_names, x.tolist(), strict=True))
+    if lensing is not None and not lensing(values):
+        logger.info("SPix1 rescan: the far basin forms one image of its source")
+        return None
+    return values
+
+
 def rescan(
     space: ParameterSpace,
     likelihood: Callable[[np.ndarray], float],
     centre: tuple[float, float],
     lensing: Callable[[dict], bool] | None = None,
+    start_points: Sequence[dict] = (),
 ) -> Rescan:
-    """Steps 1–4 on SPix1's problem (its passed-prior ``space``, its ``likelihood``, the
-    lens light's ``centre`` in arcsec); see the module. ``lensing`` (free values → bool),
-    if given, must accept the far point too: SPix1 passes whether that mass forms several
+    """Steps 1–5 on SPix1's problem (its passed-prior ``space``, its ``likelihood``, the
+    lens light's ``centre`` in arcsec, SP's start's unchosen polished points
+    ``start_points`` as free values); see the module. ``lensing`` (free values → bool),
+    if given, must accept the point moved to: SPix1 passes whether that mass forms several
     images of its source's brightest point, so that an unlensed, demagnified copy of the
     image, which a pixelized source can fit well, is never taken."""
     began = time.perf_counter()
@@ -189,9 +260,11 @@ def rescan(
     far_x[theta], far_value = radii[far_index], values[far_index]
     scanned = (float(near_x[theta]), float(near_value), float(far_x[theta]), float(far_value))
     polished = [None, None, None, None]
+    polished_near = None
     moved = None
     if far_value >= near_value + THRESHOLD:
         points = [_polish(posterior, x, centre) for x in (near_x, far_x)]
+        polished_near = points[0]
         polished = [float(points[0][0][theta]), points[0][1], float(points[1][0][theta]),
                     points[1][1]]  # fmt: skip
         baseline = max((v for x, v in points if in_sp_basin(x[theta])), default=near_value)
@@ -201,18 +274,38 @@ def rescan(
             default=(-np.inf, None),
         )
         if value >= baseline + THRESHOLD:
-            moved = dict(zip(space.free_names, best.tolist(), strict=True))
-            if lensing is not None and not lensing(moved):
-                logger.info("SPix1 rescan: the far basin forms one image of its source")
-                moved = None
+            moved = _lensed(space, best, lensing)
+    scored, widths, from_start = [], [], [None, None, None]
+    if moved is None and start_points:
+        starts = [
+            _with_best_coefficient(posterior, _with_values(space, reference, point))
+            for point in start_points
+        ]
+        scored = [posterior(x) for x in starts]
+        widths = [widths_from_sp(space, x) for x in starts]
+        value, best = max(
+            ((v, x) for v, x, w in zip(scored, starts, widths, strict=True) if w > BASIN_WIDTHS),
+            key=lambda pair: pair[0],
+            default=(-np.inf, None),
+        )
+        if value >= near_value + THRESHOLD:
+            if polished_near is None:
+                polished_near = _polish(posterior, near_x, centre)
+                polished[:2] = float(polished_near[0][theta]), polished_near[1]
+            baseline = polished_near[1]
+            best, value = _polish(posterior, best, centre)
+            from_start = [float(best[theta]), value, widths_from_sp(space, best)]
+            if from_start[2] > BASIN_WIDTHS and value >= baseline + THRESHOLD:
+                moved = _lensed(space, best, lensing)
     found = Rescan(float(reference[theta]), *scanned, *polished, moved, posterior.calls,
-                   time.perf_counter() - began)  # fmt: skip
+                   time.perf_counter() - began, tuple(scored), tuple(widths),
+                   *from_start)  # fmt: skip
     logger.info(
-        "SPix1 rescan: ln P %.1f at θ_E %.3f″ (SP's basin), %.1f at %.3f″ beyond it; %s "
-        "(%d calls)", found.near_log_posterior, found.near_einstein_radius,
-        found.far_log_posterior, found.far_einstein_radius,
-        "priors re-centred on the far point" if found.moved else "SP's priors kept",
-        found.n_calls,
+        "SPix1 rescan: ln P %.1f at θ_E %.3f″ (SP's basin), %.1f at %.3f″ beyond it, "
+        "%s at SP's start's other polishes; %s (%d calls)",
+        found.near_log_posterior, found.near_einstein_radius, found.far_log_posterior,
+        found.far_einstein_radius, ", ".join(f"{v:.1f}" for v in scored) or "none",
+        "priors re-centred" if found.moved else "SP's priors kept", found.n_calls,
     )  # fmt: skip
     return found
 
@@ -234,6 +327,6 @@ def read_or_rescan(folder: Path, fingerprint: dict, run: Callable[[], Rescan]) -
     """The rescan recorded in ``folder/rescan.json`` for ``fingerprint`` (the inputs and
     settings it was made for), else ``run()``'s, written there atomically with it."""
     return read_or_make(
-        folder / RESCAN_FILE, "rescan", fingerprint, run, lambda d: Rescan(**d), logger,
+        folder / RESCAN_FILE, "rescan", fingerprint, run, Rescan.from_dict, logger,
         "SPix1 rescan",
     )  # fmt: skip

@@ -548,7 +548,7 @@ def run_phase(
         if name == "sp" and settings.sp_start == "search":
             problems = [started_sp(first, folder, checksums)]
         if name == "spix1" and settings.spix1_rescan:
-            problems = [rescanned_spix1(first, folder, checksums, settings)]
+            problems = [rescanned_spix1(first, folder, checksums, settings, results_dir)]
         if bound_by is not None:
             skipped = _bounded_candidate(
                 first, results_dir, bound_by, folder, settings, lens, lens_dir, checksums
@@ -644,14 +644,20 @@ def started_sp(problem: PhaseProblem, folder: Path, checksums: dict) -> PhasePro
 
 
 def rescanned_spix1(
-    problem: PhaseProblem, folder: Path, checksums: dict, settings: SlamSettings
+    problem: PhaseProblem,
+    folder: Path,
+    checksums: dict,
+    settings: SlamSettings,
+    results_dir: Path,
 ) -> PhaseProblem:
     """SPix1's problem with its mass and shear priors re-centred where its own rescan of
-    θ_E found a far better basin than SP's (:mod:`mass_rescan`; unchanged otherwise),
-    read from ``folder/rescan.json`` when it was made for the same inputs (``checksums``)
-    and settings. The rescan evaluates ln ε without the positions penalty, whose image
-    positions are SP's and hold SP's mass, and moves only to a mass that forms several
-    images of its source's brightest point; a re-centred problem takes those images for
+    θ_E, or of SP's start's other polished points (``results_dir/sp/start.json``, where SP
+    searched a start), found a far better basin than SP's (:mod:`mass_rescan`; unchanged
+    otherwise), read from ``folder/rescan.json`` when it was made for the same inputs
+    (``checksums``), settings and start points. The rescan evaluates ln ε without the
+    positions penalty, whose image positions are SP's and hold SP's mass, and moves only
+    to a mass that forms several images of its source's brightest point; a re-centred
+    problem takes those images for
     its positions penalty (:func:`positions_of`; MASS then reads them from SPix1's
     record), and the rescan's point is its ``reference``."""
     space = problem.space
@@ -664,14 +670,19 @@ def rescanned_spix1(
         brightest = result.source.mesh.points[np.argmax(result.source.fluxes)]
         return positions_of(result, tuple(brightest), settings)
 
+    start_points = sp_start.unchosen_polishes(Path(results_dir) / "sp" / sp_start.START_FILE)
+    fingerprint = problem_fingerprint(problem, checksums)
+    if start_points:
+        fingerprint["start_points"] = start_points
     found = mass_rescan.read_or_rescan(
         folder,
-        problem_fingerprint(problem, checksums),
+        fingerprint,
         lambda: mass_rescan.rescan(
             space,
             likelihood,
             models.lens_light_centre(medians),
             lambda values: len(images(values).positions) > 1,
+            start_points,
         ),
     )
     if not found.moved:

@@ -48,7 +48,9 @@ the mass puts it; local optimisers started from round masses fall into the same 
    highest ln P of the six wins. Where the lens light dominates SP's likelihood, the
    arcs' point alone led into an elongated mass traded against a strong shear, while
    the light-shaped point reaches a far higher maximum near the true mass
-   (docs/paper_mocks.md, M3).
+   (docs/paper_mocks.md, M3). Every start's polished point is recorded: SPix1's rescan
+   scores the two SP did not choose with its pixelized source, whose preference can
+   differ from SP's parametric one (:mod:`mgelens.pipeline.mass_rescan`, step 5).
 
 Every step runs with the non-negative linear solve (:meth:`FitDataset.non_negative`,
 called by :func:`mgelens.pipeline.run.started_sp`), also where
@@ -66,6 +68,7 @@ is deterministic and its record (``start.json`` in SP's folder) is reused when S
 on the same inputs and settings, so a resumed SP samples the same priors.
 """
 
+import json
 import logging
 import time
 from collections.abc import Callable, Sequence
@@ -200,6 +203,11 @@ class SPStart:
         written before the scan).
     scanned_mass : bool
         Whether the polish that won began from that sphere's θ_E (step 4).
+    polishes : list of dict
+        The polished point of each starting point, in the order of
+        :data:`STARTING_POINTS`: ``{"values": free values, "log_posterior": ln P}`` (empty
+        in records written before they were kept). SPix1's rescan scores the ones SP did
+        not choose with its pixelized source (:mod:`mgelens.pipeline.mass_rescan`).
     """
 
     values: dict | None
@@ -213,6 +221,16 @@ class SPStart:
     light_shaped_mass: bool = False
     scanned_einstein_radius: float | None = None
     scanned_mass: bool = False
+    polishes: tuple[dict, ...] = ()
+
+    @property
+    def chosen(self) -> int:
+        """Index in :data:`STARTING_POINTS` of the starting point whose polish won."""
+        return 2 if self.scanned_mass else int(self.light_shaped_mass)
+
+    def unchosen_polishes(self) -> list[dict]:
+        """Free values of the polished points that SP did not start from."""
+        return [p["values"] for i, p in enumerate(self.polishes) if i != self.chosen]
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -220,7 +238,9 @@ class SPStart:
     @classmethod
     def from_dict(cls, content: dict) -> "SPStart":
         arcs = content["arcs"]
-        return cls(**{**content, "arcs": None if arcs is None else ArcMass(**arcs)})
+        polishes = tuple(content.get("polishes", ()))
+        arcs = None if arcs is None else ArcMass(**arcs)
+        return cls(**{**content, "arcs": arcs, "polishes": polishes})
 
 
 class _Posterior:
@@ -536,7 +556,7 @@ def search(
         (space.vector(light_shaped(arc_start, names)), arcs.einstein_radius),
         (space.vector(light_shaped(scanned, names)), scanned_radius),
     ]
-    x, value, held, chosen = polish_starts(posterior, starts, names, centre)
+    (x, value, held, chosen), polished = polish_starts(posterior, starts, names, centre)
     found = dict(zip(names, x.tolist(), strict=True))
     logger.info(
         "SP start: polished ln P %.1f (from the %s, θ_E %s), θ_E %.3f″, %d calls",
@@ -548,7 +568,7 @@ def search(
     )
     return SPStart(found, value, light_value, arcs, len(ax), posterior.calls,
                    time.perf_counter() - began, held, chosen > 0, scanned_radius,
-                   chosen == 2)  # fmt: skip
+                   chosen == 2, polished)  # fmt: skip
 
 
 def light_shaped(start: dict, names: Sequence[str]) -> dict:
@@ -573,12 +593,13 @@ def polish_starts(
     starts: Sequence[tuple[np.ndarray, float]],
     names: Sequence[str],
     centre: tuple[float, float],
-) -> tuple[np.ndarray, float, bool, int]:
+) -> tuple[tuple[np.ndarray, float, bool, int], tuple[dict, ...]]:
     """:func:`polish` from each of ``starts`` (a free vector and the θ_E, arcsec, its held
     polish stays near; in the order of :data:`STARTING_POINTS`); the highest ln P wins (a
     tie goes to the earlier start). Returns the point, its ln P, whether the held polish
-    won and the index of the winning start."""
-    best = None
+    won and the index of the winning start; and every start's polished point as
+    :attr:`SPStart.polishes` records it."""
+    best, polished = None, []
     for index, (start, einstein_radius) in enumerate(starts):
         x, value, held = polish(posterior, start, names, centre, einstein_radius)
         logger.info(
@@ -588,9 +609,11 @@ def polish_starts(
             x[names.index("mass.einstein_radius")],
             "held" if held else "free",
         )
+        polished.append({"values": dict(zip(names, x.tolist(), strict=True)),
+                         "log_posterior": float(value)})  # fmt: skip
         if best is None or value > best[1]:
             best = (x, value, held, index)
-    return best
+    return best, tuple(polished)
 
 
 def polish(
@@ -678,6 +701,19 @@ def started_space(space: ParameterSpace, start: SPStart) -> ParameterSpace:
         prior = passed_prior(name, value, 0.0, width_of(name), limits, "2024")
         space = space.with_prior(name, prior)
     return space
+
+
+def unchosen_polishes(path: Path) -> list[dict]:
+    """:meth:`SPStart.unchosen_polishes` of the start record at ``path``; none where SP
+    searched no start (no file). An unreadable record stops with its path and the fix."""
+    if not path.is_file():
+        return []
+    try:
+        return SPStart.from_dict(json.loads(path.read_text())["start"]).unchosen_polishes()
+    except (ValueError, KeyError, TypeError) as error:
+        raise ValueError(
+            f"{path} is not an SP start record ({error}): delete it and rerun phase 'sp'"
+        ) from error
 
 
 def read_or_search(folder: Path, fingerprint: dict, run: Callable[[], SPStart]) -> SPStart:
