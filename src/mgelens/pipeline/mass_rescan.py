@@ -1,4 +1,4 @@
-"""SPix1's rescan of the Einstein radius: the pixelized source's view of SP's mass.
+"""SPix1's rescan of θ_E and of SP's start: the pixelized source's view of SP's mass.
 
 SP fits a parametric (MGE) source. A source of several components can give that model a
 best mass far from the true one: on the coverage study's P05 (two spiral discs 0.5″
@@ -25,12 +25,11 @@ Before SPix1 samples (``slam.spix1_rescan``, the quick profile):
    (the best polished point within it; ``near`` if both polishes left it) by
    :data:`THRESHOLD`, SPix1's mass and shear priors are re-centred on that point, their
    widths as passed (SPEC §8.2).
-
 5. Where the scan kept SP's basin, SP's start's other polished points (those SP did not
    start from, :attr:`~mgelens.pipeline.sp_start.SPStart.polishes`) are scored (the
    coefficient chosen on the grid, about 17 calls each). SP's parametric source can
    prefer a wrong mass that its pixelized counterpart does not: on the coverage study's
-   P18 SP chose the arcs' SIE + shear (shear 0.15 for a true 0.03) at SPix1's ln P
+   P18 SP chose the arcs' SIE + shear (shear 0.14 for a true 0.04) at SPix1's ln P
    15,026, where its light-shaped polishes score 22,901 and 23,710 (docs/coverage.md).
    A point counts if it lies more than :data:`BASIN_WIDTHS` of SPix1's passed prior
    widths from their means (SP's posterior; :func:`widths_from_sp`), since within them

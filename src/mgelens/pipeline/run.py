@@ -657,9 +657,8 @@ def rescanned_spix1(
     (``checksums``), settings and start points. The rescan evaluates ln ε without the
     positions penalty, whose image positions are SP's and hold SP's mass, and moves only
     to a mass that forms several images of its source's brightest point; a re-centred
-    problem takes those images for
-    its positions penalty (:func:`positions_of`; MASS then reads them from SPix1's
-    record), and the rescan's point is its ``reference``."""
+    problem takes those images for its positions penalty (:func:`positions_of`; MASS then
+    reads them from SPix1's record), and the rescan's point is its ``reference``."""
     space = problem.space
     likelihood = PhaseLikelihood(problem.dataset, space, problem.model)
     medians = space.values(space.prior_transform(np.full(space.n_free, 0.5)))
