@@ -23,7 +23,7 @@ from mgelens.imaging import Imaging
 from mgelens.isophotes import STATISTICS_SMA_RANGE, isophote_table
 from mgelens.mask import contaminant_regions_from_noise
 from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
-from mgelens.pipeline import mass_rescan, models, problem, products, records, run
+from mgelens.pipeline import mass_rescan, models, problem, products, records, run, sp_start
 from mgelens.pipeline.phases import light as light_phase
 from mgelens.pipeline.phases import mass as mass_phase
 from mgelens.pipeline.phases import sp as sp_phase
@@ -769,9 +769,26 @@ def test_spix1_samples_around_a_moved_rescan_with_its_own_image_positions(
               "mass.centre_x": medians["mass.centre_x"] + 0.03, "shear.gamma_1": 0.02}  # fmt: skip
     outcome = mass_rescan.Rescan(medians["mass.einstein_radius"], 0, 0, 0, 0, 0, 0, 0, 0, moved,
                                  100, 0.1)  # fmt: skip
+    # SP's start as if it had found arcs and chosen its first polish (this mock's SP finds
+    # too few arc pixels to polish anything)
+    polishes = [{**medians, "mass.einstein_radius": r} for r in (1.0, 1.1, 1.2)]
+    start = sp_start.SPStart(
+        polishes[0],
+        0.0,
+        0.0,
+        None,
+        50,
+        1,
+        0.1,
+        polishes=tuple({"values": v, "log_posterior": 0.0} for v in polishes),
+    )
+    (tmp_path / "sp" / sp_start.START_FILE).write_text(json.dumps({"start": start.to_dict()}))
     calls = []
-    monkeypatch.setattr(mass_rescan, "rescan", lambda *a: calls.append(1) or outcome)
+    monkeypatch.setattr(mass_rescan, "rescan", lambda *a: calls.append(a) or outcome)
     result = run.run_phase("spix1", mock_dir, tmp_path, settings, LENS)
+    assert calls[0][-1] == polishes[1:]  # SP's start's other polishes go to the rescan
+    recorded = json.loads((tmp_path / "spix1" / mass_rescan.RESCAN_FILE).read_text())
+    assert recorded["fingerprint"]["start_points"] == polishes[1:]
     for name in models.PASSED_MASS_NAMES:
         prior, passed = result.space.parameter(name).prior, passed_space.parameter(name).prior
         assert prior.mean == pytest.approx(moved[name])
