@@ -12,6 +12,8 @@ keeps), and prints
 * ``stage_ms_<phase>_<stage>``: the median call split by stage, from a cProfile run of
   the same calls (``other`` is the rest: Python glue, the model image, the χ², and the
   profiler's own overhead);
+* ``figure_of_merit_sum_<phase>``: the sum of the timed calls' figures of merit (ln ε,
+  or ln L in SP), to check that two code versions or settings give the same values;
 * ``host_yardstick_cpu_ms``: the host's speed on a fixed workload
   (``common.host_yardstick_ms``), to compare figures across hosts.
 
@@ -229,9 +231,11 @@ def stage_times(profile: cProfile.Profile, n_calls: int) -> dict[str, float]:
     return out
 
 
-def run(calls: dict, n_calls: int) -> tuple[dict, dict, dict]:
-    """Median wall and CPU ms per call, and stage ms per call, of every phase."""
-    timings, cpu_timings, stages = {}, {}, {}
+def run(calls: dict, n_calls: int) -> tuple[dict, dict, dict, dict]:
+    """Median wall and CPU ms per call, stage ms per call and the sum of the timed calls'
+    figures of merit (to check that two code versions give the same values), of every
+    phase."""
+    timings, cpu_timings, stages, sums = {}, {}, {}, {}
     for phase, (dataset, model, values, passive) in calls.items():
 
         def call(v, dataset=dataset, model=model, passive=passive):
@@ -240,14 +244,16 @@ def run(calls: dict, n_calls: int) -> tuple[dict, dict, dict]:
             return figure_of_merit(dataset, model.build(v), passive)
 
         call(values[0])  # warm-up (compiles, fills caches)
-        times, cpu_times = [], []
+        times, cpu_times, merits = [], [], []
         for v in values:
             start, start_cpu = time.perf_counter(), time.process_time()
-            _, reason = call(v)
+            merit, reason = call(v)
             times.append(time.perf_counter() - start)
             cpu_times.append(time.process_time() - start_cpu)
             if reason:
                 raise RuntimeError(f"{phase}: a benchmark call was rejected: {reason}")
+            merits.append(merit)
+        sums[phase] = float(np.sum(merits))
         timings[phase] = 1e3 * float(np.median(times))
         cpu_timings[phase] = 1e3 * float(np.median(cpu_times))
         profile = cProfile.Profile()
@@ -260,7 +266,7 @@ def run(calls: dict, n_calls: int) -> tuple[dict, dict, dict]:
         stage = stage_times(profile, n_calls)
         stage["other"] = profiled - sum(stage.values())
         stages[phase] = stage
-    return timings, cpu_timings, stages
+    return timings, cpu_timings, stages, sums
 
 
 def default_einstein_radius(lens_dir: Path) -> float:
@@ -305,13 +311,15 @@ def main() -> None:
         f"  psf: {dataset.convolver.psf.shape}  centre: ({centre[0]:.3f}, {centre[1]:.3f})"
         f"  einstein_radius: {theta_e}"
     )
-    timings, cpu_timings, stages = run(calls, args.calls)
+    timings, cpu_timings, stages, sums = run(calls, args.calls)
     for phase in calls:
         for stage, ms in stages[phase].items():
             if ms >= 0.05 or stage == "other":
                 print(f"stage_ms_{phase}_{stage}: {ms:.2f}")
     for phase in calls:
         print(f"call_cpu_ms_{phase}: {cpu_timings[phase]:.2f}")
+    for phase in calls:
+        print(f"figure_of_merit_sum_{phase}: {sums[phase]:.6f}")
     for phase in calls:
         print(f"call_ms_{phase}: {timings[phase]:.2f}")
 
