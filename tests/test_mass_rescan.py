@@ -195,11 +195,11 @@ LIGHT_SHAPED = {
 does not see it) 4 passed widths away in the centre and 2 in the shear."""
 
 
-def passed_space() -> ParameterSpace:
+def passed_space(around: dict = SP_MASS) -> ParameterSpace:
     """SPix1's free parameters with the passed widths of :data:`PASSED_WIDTHS` around
-    :data:`SP_MASS`."""
+    ``around`` (SP's mass)."""
     priors = {}
-    for name, value in SP_MASS.items():
+    for name, value in around.items():
         if name.endswith("radius"):
             priors[name] = TruncatedGaussian(value, 0.25 * value, 0.0, np.inf)
             continue
@@ -326,3 +326,73 @@ def test_sp_start_records_keep_every_polish_and_name_the_unchosen(tmp_path):
     path.write_text("{")
     with pytest.raises(ValueError, match="delete it and rerun phase 'sp'"):
         sp_start.unchosen_polishes(path)
+
+
+SP_SHEARED = {**SP_MASS, "mass.einstein_radius": 1.0, "shear.gamma_2": -0.17}
+"""P25's case: SP's SIE with a strong shear, 3.4 passed widths from no shear."""
+ROUND_TRUTH = {
+    **SP_MASS,
+    "mass.centre_x": 0.03,
+    "mass.einstein_radius": 0.87,
+    "shear.gamma_1": 0.01,
+    "shear.gamma_2": -0.03,
+}
+"""The true mass: another θ_E, a weak shear; a fifth of :data:`WIDTHS` wide, so that the
+θ_E scan at SP's shear (0.14 away) sees nothing of it."""
+
+
+def sheared_and_round(space, height: float):
+    def likelihood(x):
+        return max(
+            basin(space, x, SP_SHEARED, 0.0, 0.2), basin(space, x, ROUND_TRUTH, height, 0.2)
+        )
+
+    return likelihood
+
+
+def test_sps_mass_without_its_shear_finds_the_basin_no_scan_reaches():
+    space = passed_space(SP_SHEARED)
+    found = mass_rescan.rescan(space, sheared_and_round(space, 300.0), (0.0, 0.0))
+    # step 2 saw no more than a tail of it
+    assert found.far_log_posterior < found.near_log_posterior + mass_rescan.THRESHOLD
+    assert found.polished_far is None
+    assert found.start_log_posteriors == ()
+    assert found.shear_free > found.near_log_posterior + 250
+    assert found.polished_shear_free_einstein_radius == pytest.approx(0.87, abs=0.002)
+    assert found.polished_shear_free_widths > 2.5
+    assert found.polished_near_einstein_radius == pytest.approx(1.0, abs=0.002)
+    assert found.moved
+    for name, value in ROUND_TRUTH.items():
+        assert found.values[name] == pytest.approx(value, abs=0.005), name
+    recentred = mass_rescan.recentred_space(space, found)
+    assert recentred.parameter("shear.gamma_2").prior.mean == pytest.approx(-0.03, abs=0.005)
+
+
+@pytest.mark.parametrize("height", [None, 300.0])
+def test_a_right_strong_shear_or_an_unlensed_basin_keeps_sps_priors(height):
+    """Without a second basin the polish from no shear stays below SP's basin and nothing
+    more is polished; a better shear-free basin that forms one image is not taken."""
+    space = passed_space(SP_SHEARED)
+    if height is None:
+
+        def likelihood(x):
+            return basin(space, x, SP_SHEARED, 0.0, 0.2)
+
+    else:
+        likelihood = sheared_and_round(space, height)
+    found = mass_rescan.rescan(space, likelihood, (0.0, 0.0), lambda values: False)
+    assert not found.moved
+    assert found.shear_free is not None
+    if height is None:
+        assert found.shear_free < found.near_log_posterior + mass_rescan.THRESHOLD
+        assert found.polished_shear_free is None
+        assert found.n_calls < 700
+    else:
+        assert found.polished_shear_free > found.polished_near + 250
+
+
+def test_a_weak_shear_is_not_rescanned_without_it():
+    space = passed_space()
+    found = mass_rescan.rescan(space, sp_and_light_shaped(space, 300.0), (0.0, 0.0))
+    assert found.shear_free is None
+    assert found.polished_shear_free is None

@@ -37,6 +37,17 @@ Before SPix1 samples (``slam.spix1_rescan``, the quick profile):
    it and ``near`` are polished as in 4, and SPix1's priors are re-centred on the
    polished point if it still lies beyond :data:`BASIN_WIDTHS` and beats the polished
    ``near`` by :data:`THRESHOLD`.
+6. Where nothing moved yet, SP's mass without its shear: the reference with the shear set
+   to zero lies more than :data:`BASIN_WIDTHS` from SP's posterior when SP's shear is
+   strong. θ_E is scanned as in 2 at zero shear, and the best point is polished
+   (:data:`SHEAR_FREE_CALLS`, mass and shear free). An SIE with a strong shear aligned
+   with its ellipticity can mimic a rounder mass of another θ_E for SP's parametric
+   source: on the coverage study's P25 (true shear 0.05, θ_E 0.864″) SP chose shear 0.17
+   at θ_E 1.00″, and every polish from SP's basin stays there (SPix1's ln P 6,371 after
+   1,683 calls), where the polish from SP's mass without its shear climbs to 20,652, at
+   θ_E 0.874″ and shear 0.026 (docs/coverage.md, "P25"). If the short polish beats
+   ``near`` by :data:`THRESHOLD`, it and ``near`` are polished on as in 4, and SPix1's
+   priors are re-centred on it under the same rules as in 5.
 
 ln P is the phase's ln ε (positions penalty included) plus its ln prior. The outcome is
 recorded in ``spix1/rescan.json`` and read back for the same inputs and settings.
@@ -74,6 +85,12 @@ POLISH_CALLS = 1500
 """Evaluations of each polish."""
 COEFFICIENT_GRID = 10.0 ** np.arange(-3.0, 5.01, 0.5)
 """Regularization coefficients tried at each point the rescan compares."""
+SHEAR_FREE_CALLS = 300
+"""Evaluations of the first polish from SP's mass without its shear (step 6): on P25 it
+reached 19,973 of the 20,652 that 2,000 calls reach, after 100."""
+STEPS = ("theta_scan", "start_polishes", "shear_free")
+"""The rescan's steps, part of its record's fingerprint (a record made without one of
+them is made again)."""
 BASIN_WIDTHS = 1.0
 """Standardised distance (in SPix1's passed prior widths) beyond which one of SP's start's
 polished points lies outside SP's basin (step 5). On P17 the best of them lay 0.3 widths
@@ -117,6 +134,14 @@ class Rescan:
         step 5 did not call for it).
     polished_start_widths : float or None
         That point's distance from SP's posterior in passed prior widths.
+    shear_free_einstein_radius, shear_free : float or None
+        θ_E (arcsec) and ln P after the short polish from SP's mass without its shear
+        (step 6; ``None`` where an earlier step moved or that point lies within
+        :data:`BASIN_WIDTHS` of SP's posterior).
+    polished_shear_free_einstein_radius, polished_shear_free : float or None
+        The same after its full polish (``None`` when step 6 did not call for it).
+    polished_shear_free_widths : float or None
+        That point's distance from SP's posterior in passed prior widths.
     """
 
     reference_einstein_radius: float
@@ -136,6 +161,11 @@ class Rescan:
     polished_start_einstein_radius: float | None = None
     polished_start: float | None = None
     polished_start_widths: float | None = None
+    shear_free_einstein_radius: float | None = None
+    shear_free: float | None = None
+    polished_shear_free_einstein_radius: float | None = None
+    polished_shear_free: float | None = None
+    polished_shear_free_widths: float | None = None
 
     @property
     def moved(self) -> bool:
@@ -177,10 +207,13 @@ def _scan(posterior: sp_start._Posterior, x: np.ndarray) -> tuple[np.ndarray, np
 
 
 def _polish(
-    posterior: sp_start._Posterior, x: np.ndarray, centre: tuple[float, float]
+    posterior: sp_start._Posterior,
+    x: np.ndarray,
+    centre: tuple[float, float],
+    calls: int = POLISH_CALLS,
 ) -> tuple[np.ndarray, float]:
     """Powell on the mass and shear from ``x`` (centre boxed around the light centre,
-    plausible mass and shear), then the coefficient on the grid."""
+    plausible mass and shear; ``calls`` evaluations), then the coefficient on the grid."""
     names = posterior.space.free_names
     mass = [i for i, name in enumerate(names) if name in models.PASSED_MASS_NAMES]
     half = sp_start.MASS_CENTRE_RANGE
@@ -189,7 +222,7 @@ def _polish(
         for axis, c in zip(("centre_x", "centre_y"), centre, strict=True)
     }
     boxed = posterior.boxed(box, sp_start.plausible_mass(names))
-    x, _ = sp_start._maximise(boxed, sp_start.made_plausible(x, names), mass, None, POLISH_CALLS)
+    x, _ = sp_start._maximise(boxed, sp_start.made_plausible(x, names), mass, None, calls)
     posterior.boxed({})
     x = _with_best_coefficient(posterior, x)
     return x, posterior(x)
@@ -214,6 +247,14 @@ def _with_values(space: ParameterSpace, x: np.ndarray, values: dict) -> np.ndarr
     for i, name in enumerate(space.free_names):
         if name in models.PASSED_MASS_NAMES and name in values:
             x[i] = values[name]
+    return x
+
+
+def _without_shear(space: ParameterSpace, x: np.ndarray) -> np.ndarray:
+    """``x`` with its external shear set to zero."""
+    x = x.copy()
+    for name in ("shear.gamma_1", "shear.gamma_2"):
+        x[space.free_names.index(name)] = 0.0
     return x
 
 
@@ -296,14 +337,30 @@ def rescan(
             from_start = [float(best[theta]), value, widths_from_sp(space, best)]
             if from_start[2] > BASIN_WIDTHS and value >= baseline + THRESHOLD:
                 moved = _lensed(space, best, lensing)
+    shear_free, from_shear_free = [None, None], [None, None, None]
+    without_shear = _without_shear(space, reference)
+    if moved is None and widths_from_sp(space, without_shear) > BASIN_WIDTHS:
+        radii, values = _scan(posterior, without_shear)
+        without_shear[theta] = radii[int(np.argmax(values))]
+        best, value = _polish(posterior, without_shear, centre, SHEAR_FREE_CALLS)
+        shear_free = [float(best[theta]), value]
+        if value >= near_value + THRESHOLD:
+            if polished_near is None:
+                polished_near = _polish(posterior, near_x, centre)
+                polished[:2] = float(polished_near[0][theta]), polished_near[1]
+            best, value = _polish(posterior, best, centre)
+            from_shear_free = [float(best[theta]), value, widths_from_sp(space, best)]
+            if from_shear_free[2] > BASIN_WIDTHS and value >= polished_near[1] + THRESHOLD:
+                moved = _lensed(space, best, lensing)
     found = Rescan(float(reference[theta]), *scanned, *polished, moved, posterior.calls,
                    time.perf_counter() - began, tuple(scored), tuple(widths),
-                   *from_start)  # fmt: skip
+                   *from_start, *shear_free, *from_shear_free)  # fmt: skip
     logger.info(
         "SPix1 rescan: ln P %.1f at θ_E %.3f″ (SP's basin), %.1f at %.3f″ beyond it, "
-        "%s at SP's start's other polishes; %s (%d calls)",
+        "%s at SP's start's other polishes, %s without SP's shear; %s (%d calls)",
         found.near_log_posterior, found.near_einstein_radius, found.far_log_posterior,
         found.far_einstein_radius, ", ".join(f"{v:.1f}" for v in scored) or "none",
+        "none" if found.shear_free is None else f"{found.shear_free:.1f}",
         "priors re-centred" if found.moved else "SP's priors kept", found.n_calls,
     )  # fmt: skip
     return found

@@ -670,7 +670,7 @@ def rescanned_spix1(
         return positions_of(result, tuple(brightest), settings)
 
     start_points = sp_start.unchosen_polishes(Path(results_dir) / "sp" / sp_start.START_FILE)
-    fingerprint = problem_fingerprint(problem, checksums)
+    fingerprint = problem_fingerprint(problem, checksums) | {"steps": mass_rescan.STEPS}
     if start_points:
         fingerprint["start_points"] = start_points
     found = mass_rescan.read_or_rescan(
