@@ -343,9 +343,7 @@ ROUND_TRUTH = {
 
 def sheared_and_round(space, height: float):
     def likelihood(x):
-        return max(
-            basin(space, x, SP_SHEARED, 0.0, 0.2), basin(space, x, ROUND_TRUTH, height, 0.2)
-        )
+        return max(basin(space, x, SP_SHEARED, 0.0, 0.2), basin(space, x, ROUND_TRUTH, height, 0.2))
 
     return likelihood
 
