@@ -315,6 +315,21 @@ def rescan(
         )
         if value >= baseline + THRESHOLD:
             moved = _lensed(space, best, lensing)
+
+    def contest(x: np.ndarray) -> list:
+        """Steps 5 and 6: polish ``x`` and SP's basin (``near``, once) and move to the
+        polished ``x`` if it lies beyond :data:`BASIN_WIDTHS` and beats the polished
+        basin by :data:`THRESHOLD`; the polished ``x``'s θ_E, ln P and widths."""
+        nonlocal polished_near, moved
+        if polished_near is None:
+            polished_near = _polish(posterior, near_x, centre)
+            polished[:2] = float(polished_near[0][theta]), polished_near[1]
+        best, value = _polish(posterior, x, centre)
+        record = [float(best[theta]), value, widths_from_sp(space, best)]
+        if record[2] > BASIN_WIDTHS and value >= polished_near[1] + THRESHOLD:
+            moved = _lensed(space, best, lensing)
+        return record
+
     scored, widths, from_start = [], [], [None, None, None]
     if moved is None and start_points:
         starts = [
@@ -329,29 +344,16 @@ def rescan(
             default=(-np.inf, None),
         )
         if value >= near_value + THRESHOLD:
-            if polished_near is None:
-                polished_near = _polish(posterior, near_x, centre)
-                polished[:2] = float(polished_near[0][theta]), polished_near[1]
-            baseline = polished_near[1]
-            best, value = _polish(posterior, best, centre)
-            from_start = [float(best[theta]), value, widths_from_sp(space, best)]
-            if from_start[2] > BASIN_WIDTHS and value >= baseline + THRESHOLD:
-                moved = _lensed(space, best, lensing)
+            from_start = contest(best)
     shear_free, from_shear_free = [None, None], [None, None, None]
-    without_shear = _without_shear(space, reference)
-    if moved is None and widths_from_sp(space, without_shear) > BASIN_WIDTHS:
+    without_shear = _without_shear(space, reference) if moved is None else None
+    if without_shear is not None and widths_from_sp(space, without_shear) > BASIN_WIDTHS:
         radii, values = _scan(posterior, without_shear)
         without_shear[theta] = radii[int(np.argmax(values))]
         best, value = _polish(posterior, without_shear, centre, SHEAR_FREE_CALLS)
         shear_free = [float(best[theta]), value]
         if value >= near_value + THRESHOLD:
-            if polished_near is None:
-                polished_near = _polish(posterior, near_x, centre)
-                polished[:2] = float(polished_near[0][theta]), polished_near[1]
-            best, value = _polish(posterior, best, centre)
-            from_shear_free = [float(best[theta]), value, widths_from_sp(space, best)]
-            if from_shear_free[2] > BASIN_WIDTHS and value >= polished_near[1] + THRESHOLD:
-                moved = _lensed(space, best, lensing)
+            from_shear_free = contest(best)
     found = Rescan(float(reference[theta]), *scanned, *polished, moved, posterior.calls,
                    time.perf_counter() - began, tuple(scored), tuple(widths),
                    *from_start, *shear_free, *from_shear_free)  # fmt: skip
