@@ -21,7 +21,8 @@ The nominal model is an SIE + shear at the brightest pixel within 0.5″ of the 
 centre, with θ_E from ``--einstein-radius`` (default: the mock's ``truth.json``, else
 1.2″). Later phases do not read earlier results: SPix2's adapt image is the lensed source
 of the SPix1 model at the nominal mass, and LIGHT and MASS keep the k-means source of
-SPix2's nominal hyper-parameters. Stages:
+SPix2's nominal hyper-parameters (MASS's mesh with ``--mass-source-pixels`` pixels where
+given, as ``slam.mass_source_pixels`` does). Stages:
 
 * ``lens_light_columns``, ``lens_light_blur``: the linear lens light's unit columns on
   their over-sampled grid, and their PSF convolution (SP and LIGHT; the SPix phases and
@@ -189,12 +190,14 @@ def phase_calls(lens_dir: Path, settings, lens, einstein_radius: float, n_calls:
     px, py = dataset.pixel_centres
     kmeans = models.KMeansSourceModel.from_settings(px, py, adapt, settings)
     fixed_source = kmeans.fixed(values)
+    mass_mesh = replace(settings, source_pixels=settings.mass_pixels)
+    mass_source = models.KMeansSourceModel.from_settings(px, py, adapt, mass_mesh).fixed(values)
     phase_models = {
         "sp": models.PhaseModel(sp_specs, models.MGESourceModel()),
         "spix1": spix1,
         "spix2": models.PhaseModel(sp_specs, kmeans),
         "light": models.PhaseModel(light_specs, fixed_source, smoothness_prior=prior),
-        "mass": models.PhaseModel(light_specs, fixed_source, smoothness_prior=prior),
+        "mass": models.PhaseModel(light_specs, mass_source, smoothness_prior=prior),
     }
     mass_values = values | {"mass.slope": 2.0}
     calls = {}
@@ -292,9 +295,16 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--phases", nargs="+", default=list(PHASES), choices=PHASES)
     parser.add_argument("--lens-light-prior", default="none", choices=LENS_LIGHT_PRIORS)
+    parser.add_argument(
+        "--mass-source-pixels", type=int, help="MASS's k-means pixels (slam.mass_source_pixels)"
+    )
     args = parser.parse_args()
     set_threads(args.threads)
-    settings = replace(profile_settings(args.profile), lens_light_prior=args.lens_light_prior)
+    settings = replace(
+        profile_settings(args.profile),
+        lens_light_prior=args.lens_light_prior,
+        mass_source_pixels=args.mass_source_pixels,
+    )
     lens = LensSpec(
         mask_radius=args.mask_radius, mge_sets=args.mge_sets, point_set=not args.no_point_set
     )
@@ -303,7 +313,7 @@ def main() -> None:
     calls = {phase: calls[phase] for phase in args.phases}
     print(
         f"lens: {args.lens_dir.name}  profile: {args.profile}  threads: {args.threads}"
-        f"  lens_light_prior: {args.lens_light_prior}"
+        f"  lens_light_prior: {args.lens_light_prior}  mass_source_pixels: {settings.mass_pixels}"
     )
     print(f"host_yardstick_cpu_ms: {host_yardstick_ms():.1f}")
     print(
