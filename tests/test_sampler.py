@@ -9,6 +9,7 @@ import uuid
 from pathlib import Path
 
 import dynesty.bounding
+import h5py
 import numba
 import numpy as np
 import pytest
@@ -365,17 +366,28 @@ def test_nautilus_keeps_three_live_points_per_free_parameter():
     assert nautilus_live_points(30, 22) == 66
 
 
-def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
-    settings = SamplerSettings(
-        method="nautilus", n_live=100, n_networks=1, n_eff=200, progress_every=1e9
-    )
-    reference = run_nested(GaussianLikelihood(), SPACE, settings, seed=4, log=lambda _: None)
+NAUTILUS = SamplerSettings(
+    method="nautilus", n_live=100, n_networks=1, n_eff=200, progress_every=1e9, checkpoint_every=0
+)
+"""A small nautilus run copying its working file onto the checkpoint every second."""
+
+
+def interrupted_nautilus(tmp_path, reference) -> Path:
+    """The checkpoint of a nautilus run of the Gaussian killed past half its calls."""
     checkpoint = tmp_path / "sampler.pickle"
-    written = checkpoint.with_suffix(".h5")  # nautilus's own checkpoint file
+    written = checkpoint.with_suffix(".h5")  # the checkpoint copy of nautilus's file
     stop = GaussianLikelihood(stop_after=reference.n_calls // 2, stop_once_exists=written)
     with pytest.raises(Interrupted):
-        run_nested(stop, SPACE, settings, checkpoint, seed=4, log=lambda _: None)
+        run_nested(stop, SPACE, NAUTILUS, checkpoint, seed=4, log=lambda _: None)
     assert written.exists()
+    return checkpoint
+
+
+def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
+    settings = NAUTILUS
+    reference = run_nested(GaussianLikelihood(), SPACE, settings, seed=4, log=lambda _: None)
+    checkpoint = interrupted_nautilus(tmp_path, reference)
+    written = checkpoint.with_suffix(".h5")
     lines: list[str] = []
     likelihood = GaussianLikelihood()
     resumed = run_nested(likelihood, SPACE, settings, checkpoint, 4, lines.append)
@@ -390,6 +402,25 @@ def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
     written.with_suffix(".fingerprint.json").unlink()  # e.g. a copied or older folder
     with pytest.raises(CheckpointMismatchError, match=r"no sampler\.fingerprint\.json"):
         run_nested(failing_likelihood, SPACE, settings, checkpoint, 4, lambda _: None)
+
+
+def test_nautilus_resumes_from_its_checkpoint_when_killed_while_writing(tmp_path):
+    """Nautilus rewrites its HDF5 file in place; a run killed in a write leaves that file
+    without the state a resume needs (a killed MASS run on M2 left one without its random
+    state). The checkpoint is a copy taken between writes, so the resume starts from it
+    and reaches the uninterrupted run."""
+    reference = run_nested(GaussianLikelihood(), SPACE, NAUTILUS, seed=4, log=lambda _: None)
+    checkpoint = interrupted_nautilus(tmp_path, reference)
+    working = tmp_path / "sampler-working.h5"
+    with h5py.File(working, "a") as stream:  # as a kill between the unlink and the state
+        del stream["sampler"].attrs["rng_state"]
+    likelihood = GaussianLikelihood()
+    resumed = run_nested(likelihood, SPACE, NAUTILUS, checkpoint, 4, lambda _: None)
+    assert 0 < likelihood.calls < reference.n_calls
+    np.testing.assert_array_equal(resumed.samples, reference.samples)
+    assert resumed.log_evidence == reference.log_evidence
+    with h5py.File(checkpoint.with_suffix(".h5"), "r") as stream:
+        assert "rng_state" in stream["sampler"].attrs
 
 
 def test_sample_method_resolution():

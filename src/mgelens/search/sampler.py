@@ -17,7 +17,11 @@
   continuing a different fit. The checkpoint is **kept** after a
   successful run: calling :func:`run_nested` again returns the stored run without sampling.
   Callers delete it once their result files are written if they want the space back.
-  Nautilus checkpoints to ``<checkpoint stem>.h5`` (HDF5, no code), with the same sidecar.
+  Nautilus checkpoints to ``<checkpoint stem>.h5`` (HDF5, no code), with the same sidecar:
+  nautilus writes ``<stem>-working.h5`` in place, and that file is copied onto the
+  checkpoint atomically every ``checkpoint_every`` seconds (at least
+  :data:`NAUTILUS_MIN_PROGRESS_INTERVAL`), so a run killed while nautilus writes resumes
+  from the last copy (:func:`_nautilus_working_file`).
 * **Enough live points for nautilus**: a nautilus run keeps at least
   :data:`NAUTILUS_LIVE_PER_PARAMETER` live points per free parameter; a smaller ``n_live``
   is raised to that, with a log line, and the output records the number used.
@@ -43,6 +47,7 @@ import contextlib
 import json
 import logging
 import math
+import shutil
 import time
 import traceback
 import warnings
@@ -469,6 +474,36 @@ def _nautilus_checkpoint(checkpoint_path: Path | None) -> Path | None:
     return None if checkpoint_path is None else checkpoint_path.with_suffix(".h5")
 
 
+def _nautilus_working_file(checkpoint: Path) -> Path:
+    """The file nautilus itself writes while it samples, beside ``checkpoint``.
+
+    Nautilus rewrites its HDF5 file in place (a full rewrite unlinks it first), so a run
+    killed during a write leaves a file it cannot resume from: on M2 a killed MASS run left
+    one without its random state, and every retry stopped on it. Nautilus therefore writes
+    to this working copy, started from the checkpoint; :func:`_snapshot_nautilus` copies it
+    onto the checkpoint atomically between nautilus's writes, and a killed run's working
+    copy is replaced by the checkpoint when the run resumes.
+    """
+    return checkpoint.with_name(f"{checkpoint.stem}-working.h5")
+
+
+def _start_nautilus_working_file(checkpoint: Path) -> Path:
+    """The working file for a run: a copy of ``checkpoint`` if it exists, else absent."""
+    working = _nautilus_working_file(checkpoint)
+    working.unlink(missing_ok=True)
+    if checkpoint.exists():
+        shutil.copyfile(checkpoint, working)
+    return working
+
+
+def _snapshot_nautilus(working: Path | None, checkpoint: Path | None) -> None:
+    """Copy nautilus's working file onto ``checkpoint`` atomically (called between
+    ``Sampler.run`` calls, where nautilus is not writing)."""
+    if working is not None and working.exists():
+        with atomic_path(checkpoint) as temporary:
+            shutil.copyfile(working, temporary)
+
+
 NAUTILUS_LIVE_PER_PARAMETER = 3
 """Fewest nautilus live points per free parameter. Below it nautilus's bounds fail and its
 run is wrong without saying so, as the quick profile's 30 were for the 3×Sérsic MASS's
@@ -482,8 +517,9 @@ def nautilus_live_points(n_live: int, n_free: int) -> int:
 
 
 NAUTILUS_MIN_PROGRESS_INTERVAL = 1.0
-"""Shortest time between nautilus progress lines, seconds: nautilus starts no likelihood
-call once its timeout has passed, so a zero timeout would never advance."""
+"""Shortest stretch of a nautilus run between progress lines and checkpoint copies,
+seconds: nautilus starts no likelihood call once its timeout has passed, so a zero
+timeout would never advance."""
 
 
 def _nautilus_progress(sampler, seconds: float) -> str:
@@ -512,11 +548,13 @@ def _sample_nautilus(
         )
         settings = replace(settings, n_live=n_live)
     filepath = _nautilus_checkpoint(checkpoint_path)
+    working = None
     if filepath is not None:
         fingerprint = _fingerprint(space, settings, seed)
         if filepath.exists():
             _check_sidecar(filepath, fingerprint)
         write_json(fingerprint_path(filepath), fingerprint)
+        working = _start_nautilus_working_file(filepath)
     started = time.perf_counter()
     with evaluating(evaluation, settings.n_processes) as pool:
         sampler = nautilus.Sampler(
@@ -530,7 +568,7 @@ def _sample_nautilus(
             n_batch=settings.n_batch,
             pool=pool,
             seed=seed,
-            filepath=filepath,
+            filepath=working,
             resume=True,
         )
         log(f"nautilus: {space.n_free} free parameters, seed {seed}, {sampler.n_like} calls so far")
@@ -541,13 +579,21 @@ def _sample_nautilus(
             "n_eff": settings.n_eff,
             "n_like_max": cap,
             "discard_exploration": settings.discard_exploration,
-            "timeout": max(settings.progress_every, NAUTILUS_MIN_PROGRESS_INTERVAL),
+            "timeout": max(
+                min(settings.progress_every, settings.checkpoint_every),
+                NAUTILUS_MIN_PROGRESS_INTERVAL,
+            ),
             "verbose": False,
         }
         converged = sampler.run(**options)
+        _snapshot_nautilus(working, filepath)
+        logged = started
         while not converged and sampler.n_like < cap:
-            log(_nautilus_progress(sampler, time.perf_counter() - started))
+            if time.perf_counter() - logged >= settings.progress_every:
+                logged = time.perf_counter()
+                log(_nautilus_progress(sampler, logged - started))
             converged = sampler.run(**options)
+            _snapshot_nautilus(working, filepath)
         criteria = f"f_live {settings.f_live}, n_shell {settings.n_shell}, n_eff {settings.n_eff}"
         if converged:
             reason = f"stopping criteria reached ({criteria})"
