@@ -19,6 +19,7 @@ from mgelens.search.model import ParameterSpace
 from mgelens.search.posterior import SamplerOutput, pool_runs
 from mgelens.search.priors import Uniform
 from mgelens.search.sampler import (
+    NAUTILUS_NETWORK_MAX_ITER,
     CheckpointMismatchError,
     nautilus_live_points,
     resolve_sample_method,
@@ -421,6 +422,21 @@ def test_nautilus_resumes_from_its_checkpoint_when_killed_while_writing(tmp_path
     assert resumed.log_evidence == reference.log_evidence
     with h5py.File(checkpoint.with_suffix(".h5"), "r") as stream:
         assert "rng_state" in stream["sampler"].attrs
+
+
+def test_nautilus_networks_keep_loss_curves_its_checkpoint_can_hold(tmp_path):
+    """Nautilus writes each network's loss curve (one float per epoch) as an HDF5
+    attribute: at nautilus's default 10,000 epochs that attribute cannot be written, at
+    the cap it can, and the cap reaches nautilus's networks."""
+    with h5py.File(tmp_path / "limit.h5", "w") as stream:
+        stream.attrs["loss_curve_0"] = np.zeros(NAUTILUS_NETWORK_MAX_ITER)
+        with pytest.raises((RuntimeError, OSError), match="too large"):
+            stream.attrs["loss_curve_1"] = np.zeros(10_000)
+    checkpoint = tmp_path / "sampler.pickle"
+    settings = dataclasses.replace(NAUTILUS, max_calls=400)
+    run_nested(GaussianLikelihood(), SPACE, settings, checkpoint, 4, lambda _: None)
+    with h5py.File(checkpoint.with_suffix(".h5"), "r") as stream:
+        assert stream["sampler"].attrs["neural_network_max_iter"] == NAUTILUS_NETWORK_MAX_ITER
 
 
 def test_sample_method_resolution():

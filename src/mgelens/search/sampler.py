@@ -516,6 +516,14 @@ def nautilus_live_points(n_live: int, n_free: int) -> int:
     return max(n_live, NAUTILUS_LIVE_PER_PARAMETER * n_free)
 
 
+NAUTILUS_NETWORK_MAX_ITER = 5000
+"""Most training epochs of one of nautilus's neural networks (nautilus 1.0's default is
+10,000). Nautilus stores each network's loss curve, one float per epoch, as one HDF5
+attribute of its checkpoint, and an attribute holds at most 64 kB: a network that trained
+for its 10,000 epochs (80 kB) stopped a MASS run on M2 with "object header message is too
+large", and every retry with it. Networks stop earlier when their loss stops falling, so
+the cap binds only on such rare long trainings."""
+
 NAUTILUS_MIN_PROGRESS_INTERVAL = 1.0
 """Shortest stretch of a nautilus run between progress lines and checkpoint copies,
 seconds: nautilus starts no likelihood call once its timeout has passed, so a zero
@@ -565,6 +573,7 @@ def _sample_nautilus(
             enlarge_per_dim=settings.enlarge_per_dim,
             split_threshold=settings.split_threshold,
             n_networks=settings.n_networks,
+            neural_network_kwargs={"max_iter": NAUTILUS_NETWORK_MAX_ITER},
             n_batch=settings.n_batch,
             pool=pool,
             seed=seed,
