@@ -407,8 +407,8 @@ def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
 
 def test_nautilus_resumes_from_its_checkpoint_when_killed_while_writing(tmp_path):
     """Nautilus rewrites its HDF5 file in place; a run killed in a write leaves that file
-    without the state a resume needs (a killed MASS run on M2 left one without its random
-    state). The checkpoint is a copy taken between writes, so the resume starts from it
+    without the state a resume needs (a MASS run on M2 stopped in a write left one without
+    its random state). The checkpoint is a copy taken between writes, so the resume starts from it
     and reaches the uninterrupted run."""
     reference = run_nested(GaussianLikelihood(), SPACE, NAUTILUS, seed=4, log=lambda _: None)
     checkpoint = interrupted_nautilus(tmp_path, reference)
