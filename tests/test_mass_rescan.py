@@ -12,6 +12,7 @@ import pytest
 from mgelens.pipeline import mass_rescan, models, sp_start
 from mgelens.pipeline.problem import positions_penalty
 from mgelens.pipeline.settings import profile_settings, settings_from_mapping
+from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 from mgelens.search.model import ParameterSpace
 from mgelens.search.priors import LogUniform, TruncatedGaussian
 
@@ -394,3 +395,20 @@ def test_a_weak_shear_is_not_rescanned_without_it():
     found = mass_rescan.rescan(space, sp_and_light_shaped(space, 300.0), (0.0, 0.0))
     assert found.shear_free is None
     assert found.polished_shear_free is None
+
+
+def test_a_polish_from_beyond_the_centre_box_moves_inside_it():
+    """SP's mass centre can end beyond the polish's box around the light (slacs1250+0523:
+    0.305″); the boxed posterior rejects that point, and a polish from it must still climb
+    rather than return its start."""
+    space = spix1_space()
+    posterior = sp_start._Posterior(two_basins(space, 0.0), space)
+    x = space.vector(
+        {**SP_MASS, **TRUE_MASS, "mass.centre_x": 0.305, "regularization.coefficient": 10.0}
+    )
+    assert posterior.boxed({0: (-0.3, 0.3)})(x) == REJECTED_LOG_LIKELIHOOD
+    posterior.boxed({})
+    start = posterior(x)
+    polished, value = mass_rescan._polish(posterior, x, (0.0, 0.0), calls=600)
+    assert value > start + 10.0
+    assert space.values(polished)["mass.centre_x"] == pytest.approx(0.03, abs=0.01)

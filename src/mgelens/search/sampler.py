@@ -479,10 +479,11 @@ def _nautilus_working_file(checkpoint: Path) -> Path:
 
     Nautilus rewrites its HDF5 file in place (a full rewrite unlinks it first), so a run
     stopped during a write leaves a file it cannot resume from: on M2 a MASS run stopped by
-    an error in such a write left one without its random state, and the retry stopped on it. Nautilus therefore writes
-    to this working copy, started from the checkpoint; :func:`_snapshot_nautilus` copies it
-    onto the checkpoint atomically between nautilus's writes, and a killed run's working
-    copy is replaced by the checkpoint when the run resumes.
+    an error in such a write left one without its random state, and the retry stopped on
+    it. Nautilus therefore writes to this working copy, started from the checkpoint;
+    :func:`_snapshot_nautilus` copies it onto the checkpoint atomically between nautilus's
+    writes, and a stopped run's working copy is replaced by the checkpoint when the run
+    resumes.
     """
     return checkpoint.with_name(f"{checkpoint.stem}-working.h5")
 
