@@ -9,7 +9,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mgelens.pipeline import mass_rescan, models, sp_start
+from mgelens.mass import SIE
+from mgelens.pipeline import mass_rescan, models, run, sp_start
 from mgelens.pipeline.problem import positions_penalty
 from mgelens.pipeline.settings import profile_settings, settings_from_mapping
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
@@ -412,3 +413,29 @@ def test_a_polish_from_beyond_the_centre_box_moves_inside_it():
     polished, value = mass_rescan._polish(posterior, x, (0.0, 0.0), calls=600)
     assert value > start + 10.0
     assert space.values(polished)["mass.centre_x"] == pytest.approx(0.03, abs=0.01)
+
+
+@pytest.mark.parametrize(("einstein_radius", "expected"), [(1.0, True), (0.3, False)])
+def test_the_rescan_moves_only_to_a_mass_that_multiply_images_most_of_the_arcs(
+    einstein_radius, expected
+):
+    """A ring of radius 1″ seen through a sphere of θ_E 1″ traces to the caustic point,
+    imaged many times; through θ_E 0.3″ it traces to a circle of 0.7″, imaged once
+    (slacs1250+0523's rescan preferred such a barely lensing mass)."""
+    pixel = 0.05
+    x, y = np.meshgrid(pixel * (np.arange(81) - 40.0), pixel * (np.arange(81) - 40.0))
+    mask = np.hypot(x, y) > 2.0
+    x, y = x[~mask], y[~mask]
+    ring = 10.0 * np.exp(-0.5 * ((np.hypot(x, y) - 1.0) / 0.05) ** 2)
+    dataset = SimpleNamespace(
+        pixel_centres=(x, y),
+        noise_map=np.ones(x.size),
+        mask=mask,
+        imaging=SimpleNamespace(pixel_scale=pixel),
+    )
+    result = SimpleNamespace(
+        dataset=dataset,
+        model=SimpleNamespace(mass=(SIE((0.0, 0.0), einstein_radius, 1.0, 0.0),)),
+        lensed_source_image=ring,
+    )
+    assert run.multiply_imaged(result, 2.0) is expected

@@ -88,9 +88,10 @@ COEFFICIENT_GRID = 10.0 ** np.arange(-3.0, 5.01, 0.5)
 SHEAR_FREE_CALLS = 300
 """Evaluations of the first polish from SP's mass without its shear (step 6): on P25 it
 reached 19,973 of the 20,652 that 2,000 calls reach, after 100."""
-STEPS = ("theta_scan", "start_polishes", "shear_free")
-"""The rescan's steps, part of its record's fingerprint (a record made without one of
-them is made again)."""
+STEPS = ("theta_scan", "start_polishes", "shear_free", "multiply_imaged")
+"""The rescan's steps and its check of the point moved to (``lensing``: since
+2026-12-05 also that most of the lensed signal is multiply imaged), part of its record's
+fingerprint (a record made without one of them is made again)."""
 BASIN_WIDTHS = 1.0
 """Standardised distance (in SPix1's passed prior widths) beyond which one of SP's start's
 polished points lies outside SP's basin (step 5). On P17 the best of them lay 0.3 widths
@@ -270,7 +271,7 @@ def _lensed(space: ParameterSpace, x: np.ndarray, lensing) -> dict | None:
     """The free values of ``x`` if ``lensing`` (when given) accepts them, else ``None``."""
     values = dict(zip(space.free_names, x.tolist(), strict=True))
     if lensing is not None and not lensing(values):
-        logger.info("SPix1 rescan: the far basin forms one image of its source")
+        logger.info("SPix1 rescan: the far basin does not multiply image its source")
         return None
     return values
 
@@ -286,8 +287,9 @@ def rescan(
     lens light's ``centre`` in arcsec, SP's start's unchosen polished points
     ``start_points`` as free values); see the module. ``lensing`` (free values → bool),
     if given, must accept the point moved to: SPix1 passes whether that mass forms several
-    images of its source's brightest point, so that an unlensed, demagnified copy of the
-    image, which a pixelized source can fit well, is never taken."""
+    images of its source's brightest point and images most of its lensed signal more than
+    once (:func:`mgelens.pipeline.run.multiply_imaged`), so that an unlensed or barely
+    lensed copy of the image, which a pixelized source can fit well, is never taken."""
     began = time.perf_counter()
     posterior = sp_start._Posterior(likelihood, space)
     reference = _with_best_coefficient(posterior, space.prior_transform(np.full(space.n_free, 0.5)))
