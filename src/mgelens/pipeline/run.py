@@ -692,18 +692,17 @@ def rescanned_spix1(
     likelihood = PhaseLikelihood(problem.dataset, space, problem.model)
     medians = space.values(space.prior_transform(np.full(space.n_free, 0.5)))
 
-    def images(values: dict) -> models.PositionsPenalty:
-        """The images of the source's brightest point under the mass of ``values``."""
-        result = fit(problem.dataset, problem.model.build({**medians, **values}))
+    def fitted(values: dict) -> FitResult:
+        return fit(problem.dataset, problem.model.build({**medians, **values}))
+
+    def images(result: FitResult) -> models.PositionsPenalty:
+        """The images of the fitted source's brightest point under the fit's mass."""
         brightest = result.source.mesh.points[np.argmax(result.source.fluxes)]
         return positions_of(result, tuple(brightest), settings)
 
     def lensed(values: dict) -> bool:
-        result = fit(problem.dataset, problem.model.build({**medians, **values}))
-        brightest = result.source.mesh.points[np.argmax(result.source.fluxes)]
-        return len(positions_of(result, tuple(brightest), settings).positions) > 1 and (
-            multiply_imaged(result, problem.mask_radius)
-        )
+        result = fitted(values)
+        return len(images(result).positions) > 1 and multiply_imaged(result, problem.mask_radius)
 
     start_points = sp_start.unchosen_polishes(Path(results_dir) / "sp" / sp_start.START_FILE)
     fingerprint = problem_fingerprint(problem, checksums) | {"steps": mass_rescan.STEPS}
@@ -724,7 +723,7 @@ def rescanned_spix1(
         return problem
     positions = problem.positions
     if positions is not None:
-        positions = images(found.values)
+        positions = images(fitted(found.values))
         logger.info("positions penalty from the rescan's mass: %s", positions.describe())
     return dataclasses.replace(
         problem,

@@ -604,6 +604,8 @@ def _sample_nautilus(
                 log(_nautilus_progress(sampler, logged - started))
             converged = sampler.run(**options)
             _snapshot_nautilus(working, filepath)
+        if working is not None:
+            working.unlink(missing_ok=True)  # the checkpoint holds the finished run
         criteria = f"f_live {settings.f_live}, n_shell {settings.n_shell}, n_eff {settings.n_eff}"
         if converged:
             reason = f"stopping criteria reached ({criteria})"
