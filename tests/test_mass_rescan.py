@@ -330,6 +330,54 @@ def test_sp_start_records_keep_every_polish_and_name_the_unchosen(tmp_path):
         sp_start.unchosen_polishes(path)
 
 
+def test_sp_start_records_give_their_arcs_sphere_as_a_round_mass_at_the_light(tmp_path):
+    arcs = sp_start.ArcMass(245, 1.061, 1.195, 0.2, 0.0, 0.1, 0.0, 0.17, -0.09, 0.28)
+    start = sp_start.SPStart({"mass.einstein_radius": 0.919}, -18727.1, -20157.9, arcs, 245,
+                             9440, 200.0)  # fmt: skip
+    path = tmp_path / sp_start.START_FILE
+    path.write_text(json.dumps({"start": start.to_dict(), "fingerprint": {}}))
+    assert sp_start.arcs_sphere(path, (-0.002, 0.004)) == {
+        "mass.centre_x": -0.002,
+        "mass.centre_y": 0.004,
+        "mass.ell_comps_1": 0.0,
+        "mass.ell_comps_2": 0.0,
+        "mass.einstein_radius": 1.061,
+        "shear.gamma_1": 0.0,
+        "shear.gamma_2": 0.0,
+    }
+    path.write_text(json.dumps({"start": dataclasses.replace(start, arcs=None).to_dict()}))
+    assert sp_start.arcs_sphere(path, (0.0, 0.0)) is None
+    assert sp_start.arcs_sphere(tmp_path / "absent.json", (0.0, 0.0)) is None
+
+
+SP_FLATTENED = {**SP_MASS, "mass.ell_comps_1": 0.39, "mass.einstein_radius": 1.023}
+"""slacs1451−0239's case: SP's mass flattened by its parametric source (q ≈ 0.44)."""
+ROUND_MASS = {**SP_MASS, "mass.einstein_radius": 1.1}
+"""A round mass at the light centre, of another θ_E (on slacs1451−0239 Bolton's b 1.04″)."""
+
+
+def test_the_arcs_sphere_reaches_a_round_basin_that_the_flattened_polishes_miss():
+    """The round basin lies 65 of its widths from SP's ellipticity and 77 from SP's θ_E, so
+    neither the θ_E scan (which holds SP's ellipticity) nor a polish from SP's basin or
+    from SP's flattened polishes sees it, and SP's weak shear leaves step 6 out; only the
+    arcs' sphere, half a width off in θ_E, starts within its reach."""
+    space = passed_space(SP_FLATTENED)
+
+    def likelihood(x):
+        return max(basin(space, x, SP_FLATTENED, 0.0, 0.2), basin(space, x, ROUND_MASS, 300.0, 0.2))
+
+    polishes = [{**SP_FLATTENED, "mass.einstein_radius": r} for r in (1.195, 1.309)]
+    sphere = {**ROUND_MASS, "mass.einstein_radius": 1.1005}
+    without = mass_rescan.rescan(space, likelihood, (0.0, 0.0), start_points=polishes)
+    assert not without.moved
+    assert without.shear_free is None
+    found = mass_rescan.rescan(space, likelihood, (0.0, 0.0), start_points=[*polishes, sphere])
+    assert found.start_log_posteriors[2] > found.near_log_posterior + 250
+    assert found.moved
+    for name, value in ROUND_MASS.items():
+        assert found.values[name] == pytest.approx(value, abs=0.005), name
+
+
 SP_SHEARED = {**SP_MASS, "mass.einstein_radius": 1.0, "shear.gamma_2": -0.17}
 """P25's case: SP's SIE with a strong shear, 3.4 passed widths from no shear."""
 ROUND_TRUTH = {

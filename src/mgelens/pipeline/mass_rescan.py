@@ -26,11 +26,16 @@ Before SPix1 samples (``slam.spix1_rescan``, the quick profile):
    :data:`THRESHOLD`, SPix1's mass and shear priors are re-centred on that point, their
    widths as passed (SPEC §8.2).
 5. Where the scan kept SP's basin, SP's start's other polished points (those SP did not
-   start from, :attr:`~mgelens.pipeline.sp_start.SPStart.polishes`) are scored (the
-   coefficient chosen on the grid, about 17 calls each). SP's parametric source can
+   start from, :attr:`~mgelens.pipeline.sp_start.SPStart.polishes`) and its arcs' sphere
+   (a round mass at the light centre with the θ_E of step 3's sphere, no shear;
+   :func:`~mgelens.pipeline.sp_start.arcs_sphere`) are scored (the coefficient chosen on
+   the grid, about 17 calls each). SP's parametric source can
    prefer a wrong mass that its pixelized counterpart does not: on the coverage study's
    P18 SP chose the arcs' SIE + shear (shear 0.14 for a true 0.04) at SPix1's ln P
-   15,026, where its light-shaped polishes score 22,901 and 23,710 (docs/coverage.md).
+   15,026, where its light-shaped polishes score 22,901 and 23,710 (docs/coverage.md). On
+   slacs1451−0239 every polish was flattened by SP's source (q ≈ 0.4, shear 0.15), and
+   the arcs' sphere (θ_E 1.061″) scores 145 above SP's basin and polishes to Bolton's
+   nearly round mass (docs/slacs.md).
    A point counts if it lies more than :data:`BASIN_WIDTHS` of SPix1's passed prior
    widths from their means (SP's posterior; :func:`widths_from_sp`), since within them
    SPix1 samples it anyway. If the best such point beats ``near`` by :data:`THRESHOLD`,
@@ -88,7 +93,7 @@ COEFFICIENT_GRID = 10.0 ** np.arange(-3.0, 5.01, 0.5)
 SHEAR_FREE_CALLS = 300
 """Evaluations of the first polish from SP's mass without its shear (step 6): on P25 it
 reached 19,973 of the 20,652 that 2,000 calls reach, after 100."""
-STEPS = ("theta_scan", "start_polishes", "shear_free", "multiply_imaged")
+STEPS = ("theta_scan", "start_polishes", "arcs_sphere", "shear_free", "multiply_imaged")
 """The rescan's steps and its check of the point moved to (``lensing``: since
 2026-12-05 also that most of the lensed signal is multiply imaged), part of its record's
 fingerprint (a record made without one of them is made again)."""
@@ -284,8 +289,8 @@ def rescan(
     start_points: Sequence[dict] = (),
 ) -> Rescan:
     """Steps 1–5 on SPix1's problem (its passed-prior ``space``, its ``likelihood``, the
-    lens light's ``centre`` in arcsec, SP's start's unchosen polished points
-    ``start_points`` as free values); see the module. ``lensing`` (free values → bool),
+    lens light's ``centre`` in arcsec, SP's start's unchosen polished points and its arcs'
+    sphere ``start_points`` as free values); see the module. ``lensing`` (free values → bool),
     if given, must accept the point moved to: SPix1 passes whether that mass forms several
     images of its source's brightest point and images most of its lensed signal more than
     once (:func:`mgelens.pipeline.run.multiply_imaged`), so that an unlensed or barely

@@ -679,8 +679,9 @@ def rescanned_spix1(
     results_dir: Path,
 ) -> PhaseProblem:
     """SPix1's problem with its mass and shear priors re-centred where its own rescan of
-    θ_E, or of SP's start's other polished points (``results_dir/sp/start.json``, where SP
-    searched a start), found a far better basin than SP's (:mod:`mass_rescan`; unchanged
+    θ_E, or of SP's start's other polished points and its arcs' sphere
+    (``results_dir/sp/start.json``, where SP searched a start; :func:`sp_start.arcs_sphere`),
+    found a far better basin than SP's (:mod:`mass_rescan`; unchanged
     otherwise), read from ``folder/rescan.json`` when it was made for the same inputs
     (``checksums``), settings and start points. The rescan evaluates ln ε without the
     positions penalty, whose image positions are SP's and hold SP's mass, and moves only
@@ -704,7 +705,9 @@ def rescanned_spix1(
         result = fitted(values)
         return len(images(result).positions) > 1 and multiply_imaged(result, problem.mask_radius)
 
-    start_points = sp_start.unchosen_polishes(Path(results_dir) / "sp" / sp_start.START_FILE)
+    start_path = Path(results_dir) / "sp" / sp_start.START_FILE
+    sphere = sp_start.arcs_sphere(start_path, models.lens_light_centre(medians))
+    start_points = sp_start.unchosen_polishes(start_path) + ([sphere] if sphere else [])
     fingerprint = problem_fingerprint(problem, checksums) | {"steps": mass_rescan.STEPS}
     if start_points:
         fingerprint["start_points"] = start_points

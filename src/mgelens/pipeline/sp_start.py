@@ -703,17 +703,49 @@ def started_space(space: ParameterSpace, start: SPStart) -> ParameterSpace:
     return space
 
 
-def unchosen_polishes(path: Path) -> list[dict]:
-    """:meth:`SPStart.unchosen_polishes` of the start record at ``path``; none where SP
-    searched no start (no file). An unreadable record stops with its path and the fix."""
+def _record(path: Path) -> SPStart | None:
+    """The start record at ``path``; ``None`` where SP searched no start (no file). An
+    unreadable record stops with its path and the fix."""
     if not path.is_file():
-        return []
+        return None
     try:
-        return SPStart.from_dict(json.loads(path.read_text())["start"]).unchosen_polishes()
+        return SPStart.from_dict(json.loads(path.read_text())["start"])
     except (ValueError, KeyError, TypeError) as error:
         raise ValueError(
             f"{path} is not an SP start record ({error}): delete it and rerun phase 'sp'"
         ) from error
+
+
+def unchosen_polishes(path: Path) -> list[dict]:
+    """:meth:`SPStart.unchosen_polishes` of the start record at ``path``; none where SP
+    searched no start (no file)."""
+    record = _record(path)
+    return [] if record is None else record.unchosen_polishes()
+
+
+def arcs_sphere(path: Path, centre: tuple[float, float]) -> dict | None:
+    """The isothermal sphere of step 3 of the start record at ``path``, as SPix1's rescan
+    scores it: θ_E the grid's sphere whose traced arc pixels scatter least
+    (:attr:`ArcMass.sphere_einstein_radius`, arcsec), centred on ``centre`` (the lens
+    light's, arcsec), round and without shear. ``None`` where SP searched no start or found
+    too few arc pixels.
+
+    SP's polishes all carry SP's parametric source's preferences; the sphere carries only
+    the arcs' radius. On slacs1451−0239 every polish was flattened (q ≈ 0.4) with a strong
+    shear, while SPix1's pixelized source polishes this sphere to Bolton's nearly round
+    mass (docs/slacs.md)."""
+    record = _record(path)
+    if record is None or record.arcs is None:
+        return None
+    return {
+        "mass.centre_x": centre[0],
+        "mass.centre_y": centre[1],
+        "mass.ell_comps_1": 0.0,
+        "mass.ell_comps_2": 0.0,
+        "mass.einstein_radius": record.arcs.sphere_einstein_radius,
+        "shear.gamma_1": 0.0,
+        "shear.gamma_2": 0.0,
+    }
 
 
 def read_or_search(folder: Path, fingerprint: dict, run: Callable[[], SPStart]) -> SPStart:
