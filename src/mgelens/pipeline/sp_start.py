@@ -454,14 +454,11 @@ def arc_mass(x, y, weight, centre: tuple[float, float], radius: float) -> ArcMas
     return ArcMass(len(x), sphere, *parameters, float(sx), float(sy), float(np.sqrt(mean_square)))
 
 
-def _mass_start(
-    values: dict, centre: tuple[float, float], parameters: Sequence[float], source: Sequence[float]
-) -> dict:
-    """``values`` with an SIE + shear (``parameters``: θ_E, e₁, e₂, γ₁, γ₂) at ``centre``
-    and the source's centre at ``source`` (arcsec)."""
+def _sie_shear(centre: tuple[float, float], parameters: Sequence[float]) -> dict:
+    """The free values of an SIE + shear (``parameters``: θ_E, e₁, e₂, γ₁, γ₂) at
+    ``centre`` (arcsec)."""
     einstein_radius, e1, e2, g1, g2 = parameters
     return {
-        **values,
         "mass.centre_x": centre[0],
         "mass.centre_y": centre[1],
         "mass.einstein_radius": einstein_radius,
@@ -469,6 +466,17 @@ def _mass_start(
         "mass.ell_comps_2": e2,
         "shear.gamma_1": g1,
         "shear.gamma_2": g2,
+    }
+
+
+def _mass_start(
+    values: dict, centre: tuple[float, float], parameters: Sequence[float], source: Sequence[float]
+) -> dict:
+    """``values`` with an SIE + shear (``parameters``: θ_E, e₁, e₂, γ₁, γ₂) at ``centre``
+    and the source's centre at ``source`` (arcsec)."""
+    return {
+        **values,
+        **_sie_shear(centre, parameters),
         f"{models.SOURCE}.set_0.centre_x": source[0],
         f"{models.SOURCE}.set_0.centre_y": source[1],
     }
@@ -737,15 +745,7 @@ def arcs_sphere(path: Path, centre: tuple[float, float]) -> dict | None:
     record = _record(path)
     if record is None or record.arcs is None:
         return None
-    return {
-        "mass.centre_x": centre[0],
-        "mass.centre_y": centre[1],
-        "mass.ell_comps_1": 0.0,
-        "mass.ell_comps_2": 0.0,
-        "mass.einstein_radius": record.arcs.sphere_einstein_radius,
-        "shear.gamma_1": 0.0,
-        "shear.gamma_2": 0.0,
-    }
+    return _sie_shear(centre, (record.arcs.sphere_einstein_radius, 0.0, 0.0, 0.0, 0.0))
 
 
 def read_or_search(folder: Path, fingerprint: dict, run: Callable[[], SPStart]) -> SPStart:
