@@ -21,7 +21,7 @@ from workflow_run import CHAIN_TIMEOUT, ROOT, snakemake
 
 from mgelens import cli, mock_lenses
 from mgelens import simulate as sim
-from mgelens.pipeline.settings import PHASES
+from mgelens.pipeline.settings import PHASES, settings_from_mapping
 from mgelens.recovery import true_mass_parameters
 from mgelens.sheet import read_sample_sheet
 
@@ -91,6 +91,17 @@ def test_dry_run_of_the_population_sample(tmp_path):
     counts = job_counts(result.stdout + result.stderr)
     assert counts["simulate_mock"] == counts["preview"] == mock_lenses.POPULATION_SIZE
     assert "smoothness" not in counts  # no M1 in the population
+
+
+def test_the_three_arcsec_samples_fit_1000_source_pixels(tmp_path):
+    """The SLACS-like samples (3.0″ masks) replace the quick profile's 500 source pixels
+    with 1,000 (docs/coverage.md, "Compact clumps under 500 source pixels"); the default
+    sample, M1–M3, keeps the profile's."""
+    default = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["slam"]
+    assert settings_from_mapping(default).source_pixels == 500
+    for name in ("coverage", "population", "paper", "slacs"):
+        sample = yaml.safe_load((ROOT / "config" / f"{name}.yaml").read_text())["slam"]
+        assert settings_from_mapping({**default, **sample}).source_pixels == 1000, name
 
 
 def test_dry_run_of_the_slacs_sample_reads_the_data_in_place(tmp_path, slacs_dir):
@@ -239,6 +250,9 @@ def test_coverage_config_fits_population_and_independent_mocks(tmp_path):
     assert counts["coverage"] == 1
     assert "mgelens simulate --independent-index 11 --population-seed 2024 --name L11 " in output
     assert "--image-size 201" in output
+    slam = re.findall(r"--slam '([^']*)'", output)
+    assert slam
+    assert all(json.loads(s) == {"profile": "quick", "source_pixels": 1000} for s in slam)
 
 
 def test_comma_separated_sheet_is_named_with_the_fix(tmp_path):
