@@ -93,7 +93,7 @@ def test_dry_run_of_the_population_sample(tmp_path):
     assert "smoothness" not in counts  # no M1 in the population
 
 
-def test_the_three_arcsec_samples_fit_1000_source_pixels(tmp_path):
+def test_the_three_arcsec_samples_fit_1000_source_pixels():
     """The SLACS-like samples (3.0″ masks) replace the quick profile's 500 source pixels
     with 1,000 (docs/coverage.md, "Compact clumps under 500 source pixels"); the default
     sample, M1–M3, keeps the profile's."""
