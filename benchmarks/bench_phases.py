@@ -21,8 +21,9 @@ The nominal model is an SIE + shear at the brightest pixel within 0.5″ of the 
 centre, with θ_E from ``--einstein-radius`` (default: the mock's ``truth.json``, else
 1.2″). Later phases do not read earlier results: SPix2's adapt image is the lensed source
 of the SPix1 model at the nominal mass, and LIGHT and MASS keep the k-means source of
-SPix2's nominal hyper-parameters (MASS's mesh with ``--mass-source-pixels`` pixels where
-given, as ``slam.mass_source_pixels`` does). Stages:
+SPix2's nominal hyper-parameters (``--source-pixels`` pixels where given, as
+``slam.source_pixels``; MASS's mesh with ``--mass-source-pixels`` pixels where given, as
+``slam.mass_source_pixels`` does). Stages:
 
 * ``lens_light_columns``, ``lens_light_blur``: the linear lens light's unit columns on
   their over-sampled grid, and their PSF convolution (SP and LIGHT; the SPix phases and
@@ -188,10 +189,11 @@ def phase_calls(lens_dir: Path, settings, lens, einstein_radius: float, n_calls:
     spix1 = models.PhaseModel(sp_specs, overlay)
     adapt = floored_adapt_image(fit(dataset, spix1.build(values)).lensed_source_image)
     px, py = dataset.pixel_centres
-    kmeans = models.KMeansSourceModel.from_settings(px, py, adapt, settings)
+    kmeans = models.KMeansSourceModel.from_settings(px, py, adapt, settings, settings.source_pixels)
     fixed_source = kmeans.fixed(values)
-    mass_mesh = replace(settings, source_pixels=settings.mass_pixels)
-    mass_source = models.KMeansSourceModel.from_settings(px, py, adapt, mass_mesh).fixed(values)
+    mass_pixels = settings.mass_pixels(settings.source_pixels)
+    mass_source = models.KMeansSourceModel.from_settings(px, py, adapt, settings, mass_pixels)
+    mass_source = mass_source.fixed(values)
     phase_models = {
         "sp": models.PhaseModel(sp_specs, models.MGESourceModel()),
         "spix1": spix1,
@@ -296,12 +298,17 @@ def main() -> None:
     parser.add_argument("--phases", nargs="+", default=list(PHASES), choices=PHASES)
     parser.add_argument("--lens-light-prior", default="none", choices=LENS_LIGHT_PRIORS)
     parser.add_argument(
+        "--source-pixels", type=int, help="k-means source pixels (slam.source_pixels)"
+    )
+    parser.add_argument(
         "--mass-source-pixels", type=int, help="MASS's k-means pixels (slam.mass_source_pixels)"
     )
     args = parser.parse_args()
     set_threads(args.threads)
+    settings = profile_settings(args.profile)
     settings = replace(
-        profile_settings(args.profile),
+        settings,
+        source_pixels=args.source_pixels or settings.source_pixels,
         lens_light_prior=args.lens_light_prior,
         mass_source_pixels=args.mass_source_pixels,
     )
@@ -313,7 +320,8 @@ def main() -> None:
     calls = {phase: calls[phase] for phase in args.phases}
     print(
         f"lens: {args.lens_dir.name}  profile: {args.profile}  threads: {args.threads}"
-        f"  lens_light_prior: {args.lens_light_prior}  mass_source_pixels: {settings.mass_pixels}"
+        f"  lens_light_prior: {args.lens_light_prior}  source_pixels: {settings.source_pixels}"
+        f"  mass_source_pixels: {settings.mass_pixels(settings.source_pixels)}"
     )
     print(f"host_yardstick_cpu_ms: {host_yardstick_ms():.1f}")
     print(

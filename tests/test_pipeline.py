@@ -1229,9 +1229,9 @@ def test_mass_source_pixels_set_the_mass_meshes_alone(sersic_run, mock_dir):
     assert sersic_settings().mass_source_pixels is None
     assert profile_settings("quick").mass_source_pixels is None
     assert profile_settings("paper").mass_source_pixels is None
-    assert sersic_settings().mass_pixels == 60
+    assert sersic_settings().mass_pixels(60) == 60
     settings = sersic_settings(mass_source_pixels=90)
-    assert settings.mass_pixels == 90
+    assert settings.mass_pixels(60) == 90
     mass = mass_phase.problem(mock_dir, sersic_run, settings, LENS)
     light = light_phase.problem(mock_dir, sersic_run, settings, LENS)
     default = mass_phase.problem(mock_dir, sersic_run, sersic_settings(), LENS)

@@ -104,6 +104,45 @@ def test_the_three_arcsec_samples_fit_1000_source_pixels():
         assert settings_from_mapping({**default, **sample}).source_pixels == 1000, name
 
 
+def test_a_list_of_source_pixel_counts_fits_spix2_per_count_and_chooses(tmp_path):
+    """`slam: source_pixels: [500, 1000]`: SPix2 once per count into `spix2_n<count>/`
+    (its --slam carrying that count), rule choose_source_pixels between them, LIGHT and
+    MASS after it with the list, and every candidate's benchmark in the chain cost."""
+    config = tmp_path / "pixels.yaml"
+    config.write_text("slam:\n  source_pixels: [1000, 500]\n")
+    result = snakemake("-n", "-p", "--configfile", str(config), workdir=tmp_path)
+    assert result.returncode == 0, result.stderr
+    output = result.stdout + result.stderr
+    counts = job_counts(output)
+    commands = [line.removeprefix("Shell command: ") for line in output.splitlines()]
+    assert counts["spix2_candidate"] == 6
+    assert counts["choose_source_pixels"] == 3
+    assert counts["phase"] == 6  # SP and MASS of M1–M3
+    for n in (500, 1000):
+        line = next(
+            line
+            for line in commands
+            if line.startswith("mgelens phase spix2")
+            and "--results results/M2 " in line
+            and f"--folder spix2_n{n} " in line
+        )
+        assert json.loads(re.search(r"--slam '([^']*)'", line)[1])["source_pixels"] == n
+    assert (
+        "mgelens choose --results results/M2 --source-pixels 500 1000 --threshold 5.0 "
+        "--record results/M2/source_pixels_choice.json" in output
+    )
+    for phase in ("sp", "light", "mass"):
+        line = next(
+            line
+            for line in commands
+            if line.startswith(f"mgelens phase {phase} ") and "--results results/M2 " in line
+        )
+        assert json.loads(re.search(r"--slam '([^']*)'", line)[1])["source_pixels"] == [1000, 500]
+    cost = next(line for line in commands if line.startswith("mgelens cost "))
+    assert "results/M2/benchmarks/spix2_n500.tsv results/M2/benchmarks/spix2_n1000.tsv" in cost
+    assert "results/M2/benchmarks/spix2.tsv" not in cost
+
+
 def test_dry_run_of_the_slacs_sample_reads_the_data_in_place(tmp_path, slacs_dir):
     result = snakemake("-n", "--configfile", "config/slacs.yaml", workdir=tmp_path)
     assert result.returncode == 0, result.stderr

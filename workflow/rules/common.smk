@@ -20,6 +20,8 @@ from mgelens.imaging import INFO_FILE, MASK_FILE
 from mgelens.mock_study import MODELS as MOCK_STUDY_MODELS
 from mgelens.mock_study import PAPER_MOCKS
 from mgelens.pipeline.model_choice import candidates as light_candidates
+from mgelens.pipeline.pixel_choice import FOLDER_PREFIX as SPIX2_PREFIX
+from mgelens.pipeline.pixel_choice import folder as spix2_folder
 from mgelens.provenance import command_version
 from mgelens.pipeline.settings import SettingsError, settings_from_mapping
 from mgelens.sheet import SheetError, read_sample_sheet
@@ -291,14 +293,14 @@ def reference_tables() -> list[str]:
 
 
 def chain_cost_inputs(wildcards) -> list[str]:
-    """The benchmark files of every lens's chain jobs (SP, SPix1, SPix2, its LIGHT job or
-    candidates, MASS) that the chain_cost step sums (mgelens.chain_cost), for the
+    """The benchmark files of every lens's chain jobs (SP, SPix1, SPix2 or its candidates,
+    its LIGHT job or candidates, MASS) that the chain_cost step sums (mgelens.chain_cost), for the
     sheet's current LIGHT models only, not files left from another configuration."""
     files = []
     for lens in LENSES.index:
         models = lens_light_models(lens)
         light = ["light"] if len(models) == 1 else [model.folder for model in models]
-        jobs = ["sp", "spix1", "spix2", *light, "mass"]
+        jobs = ["sp", "spix1", *SPIX2_JOBS, *light, "mass"]
         files += [f"results/{lens}/benchmarks/{job}.tsv" for job in jobs]
     return files
 
@@ -391,10 +393,18 @@ def all_targets() -> list[str]:
 PHASES = ["sp", "spix1", "spix2", "light", "mass"]
 LIGHT_FOLDERS = "light_x[0-9]+(?:_point)?"
 """Folders of LIGHT candidates (mgelens.pipeline.model_choice.LightModel.folder)."""
+SPIX2_FOLDERS = f"{SPIX2_PREFIX}[0-9]+"
+"""Folders of SPix2 candidates (mgelens.pipeline.pixel_choice.folder)."""
+SOURCE_PIXELS = settings_from_mapping(config["slam"]).source_pixel_candidates
+"""The k-means pixel counts of the config: one, or the candidates that rule
+choose_source_pixels compares by SPix2's evidence (mgelens.pipeline.pixel_choice)."""
+CHOSEN_PIXELS = len(SOURCE_PIXELS) > 1
+SPIX2_JOBS = [spix2_folder(n) for n in SOURCE_PIXELS] if CHOSEN_PIXELS else ["spix2"]
+"""The SPix2 jobs of every lens: one per candidate count, or `spix2` itself."""
 
 
 wildcard_constraints:
-    phase=f"{'|'.join(PHASES)}|{LIGHT_FOLDERS}",
+    phase=f"{'|'.join(PHASES)}|{LIGHT_FOLDERS}|{SPIX2_FOLDERS}",
 
 
 def lens_light_models(lens: str):
@@ -418,9 +428,9 @@ PINNED_LIGHT = other_than(CHOSEN_LIGHT_LENSES)
 def phase_inputs(wildcards) -> dict:
     """Imaging files of the lens, the result files of the phases before this one and, after
     SPix1, SPix1's adapt image. A LIGHT candidate (`light_x<n>[_point]`) needs what LIGHT
-    needs."""
+    needs, an SPix2 candidate (`spix2_n<count>`) what SPix2 needs."""
     files = imaging_files(wildcards)
-    phase = "light" if wildcards.phase.startswith("light") else wildcards.phase
+    phase = phase_name(wildcards)
     earlier = PHASES[: PHASES.index(phase)]
     for name in earlier:
         files[name] = f"results/{wildcards.lens}/{name}/result.json"
@@ -492,7 +502,7 @@ def phase_options(wildcards) -> str:
     """Per-lens CLI options from the sample sheet: the mask radius, pixel scale and
     contaminants file, and for
     LIGHT (the only phase that reads them) the MGE sets and point set of the pinned model
-    or of the candidate; then the config's sampler seed."""
+    or of the candidate; a candidate's folder; then the config's sampler seed."""
     row = lens_row(wildcards.lens)
     options = f"--mask-radius {row['mask_radius']}{pixel_scale_option(wildcards)}"
     options += contaminants_option(wildcards)
@@ -500,8 +510,8 @@ def phase_options(wildcards) -> str:
         model = light_model_of(wildcards)
         point = "yes" if model.point_set else "no"
         options += f" --mge-sets {model.mge_sets} --point-set {point}"
-        if wildcards.phase != "light":
-            options += f" --folder {wildcards.phase}"
+    if wildcards.phase != phase_name(wildcards):
+        options += f" --folder {wildcards.phase}"
     reference = light_bound_reference(wildcards)
     if reference is not None:
         options += f" --bound-by {reference} --bound-threshold {config['model_choice_threshold']}"
@@ -526,7 +536,8 @@ def phase_settings(wildcards) -> str:
     changing one phase's sampler reruns that phase (and the phases after it) only;
     `mass_source_pixels` goes to MASS only, `source_support` and `kmeans_seeding`
     (the k-means mesh's) to the phases from SPix2 on, and `lens_light_prior` to LIGHT
-    and MASS, likewise."""
+    and MASS, likewise. An SPix2 candidate (`spix2_n<count>`) gets its own count as
+    `source_pixels`."""
     light = lens_light_settings(wildcards.lens)
     section = {**config["slam"], **light}
     fit = {**(config["slam"].get("fit") or {}), **light.get("fit", {})}
@@ -543,6 +554,8 @@ def phase_settings(wildcards) -> str:
         section.pop("lens_light_prior", None)
     if phase in samplers:
         section["samplers"] = {phase: samplers[phase]}
+    if wildcards.phase.startswith(SPIX2_PREFIX):
+        section["source_pixels"] = int(wildcards.phase.removeprefix(SPIX2_PREFIX))
     return json.dumps(section, sort_keys=True)
 
 
@@ -555,8 +568,18 @@ def lens_light_settings(lens: str) -> dict:
 
 
 def phase_name(wildcards) -> str:
-    """The SLaM phase a `phase` wildcard runs: `light` for a LIGHT candidate's folder."""
-    return "light" if wildcards.phase.startswith("light") else wildcards.phase
+    """The SLaM phase a `phase` wildcard runs: `light` for a LIGHT candidate's folder,
+    `spix2` for an SPix2 candidate's."""
+    if wildcards.phase.startswith("light"):
+        return "light"
+    if wildcards.phase.startswith(SPIX2_PREFIX):
+        return "spix2"
+    return wildcards.phase
+
+
+def spix2_candidate_results(wildcards) -> list[str]:
+    """result.json of each SPix2 candidate of a lens (rule choose_source_pixels)."""
+    return [f"results/{wildcards.lens}/{job}/result.json" for job in SPIX2_JOBS]
 
 
 def phase_priority(wildcards) -> int:

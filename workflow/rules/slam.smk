@@ -7,6 +7,11 @@ lenses at a time; the config's `slam:` section goes to every phase (`--slam`) wi
 that phase's sampler settings, and changing it reruns the phases. SPix1 also writes the
 adapt image that SPix2, LIGHT and MASS read (rule `phase_spix1`).
 
+SPix2: with one `source_pixels` count in the config, rule `phase` fits it. With a list,
+each count is fitted into `spix2_n<count>/` (rule `spix2_candidate`) and rule
+`choose_source_pixels` keeps the count SPix2's evidence prefers, copies it into `spix2/`,
+which LIGHT and MASS read, and writes `source_pixels_choice.json`.
+
 LIGHT: a lens whose sheet row pins `mge_sets` and `point_set` fits it once (rule
 `phase_light`). A row with `auto` fits each candidate model into `light_<model>/` (rule
 `light_candidate`); rule `choose_light` keeps the one the Bayesian evidence prefers,
@@ -21,7 +26,7 @@ rule phase:
         samples="results/{lens}/{phase}/samples.csv",
         model="results/{lens}/{phase}/model.fits",
     wildcard_constraints:
-        phase="sp|spix2|mass",
+        phase="sp|mass" if CHOSEN_PIXELS else "sp|spix2|mass",
     log:
         "logs/{lens}/{phase}.log",
     benchmark:
@@ -55,6 +60,40 @@ use rule phase as phase_spix1 with:
         adapt_image="results/{lens}/{phase}/adapt_image.fits",
     wildcard_constraints:
         phase="spix1",
+
+
+use rule phase as spix2_candidate with:
+    wildcard_constraints:
+        phase=SPIX2_FOLDERS if CHOSEN_PIXELS else "(?!)",
+
+
+rule choose_source_pixels:
+    input:
+        spix2_candidate_results,
+    output:
+        result="results/{lens}/spix2/result.json",
+        samples="results/{lens}/spix2/samples.csv",
+        model="results/{lens}/spix2/model.fits",
+        choice="results/{lens}/source_pixels_choice.json",
+    wildcard_constraints:
+        lens=".+" if CHOSEN_PIXELS else "(?!)",
+    log:
+        "logs/{lens}/choose_source_pixels.log",
+    benchmark:
+        "results/{lens}/benchmarks/choose_source_pixels.tsv"
+    params:
+        mgelens_version=command_version("choose"),
+        counts=" ".join(str(n) for n in SOURCE_PIXELS),
+        threshold=config["model_choice_threshold"],
+    threads: 1
+    resources:
+        mem_mb=500,
+        runtime=5,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens choose --results results/{wildcards.lens} --source-pixels {params.counts} "
+        "--threshold {params.threshold} --record {output.choice:q} > {log:q} 2>&1"
 
 
 use rule phase as phase_light with:

@@ -193,16 +193,23 @@ def adopt(
     results_dir = Path(results_dir)
     found = [Candidate.read(results_dir / m.folder, m) for m in models]
     chosen = choose(found, threshold)
-    source = results_dir / LightModel.from_label(chosen.label).folder
-    for name in PHASE_FILES:
-        if (source / name).is_file():
-            with atomic_path(results_dir / "light" / name) as temporary:
-                shutil.copyfile(source / name, temporary)
+    copy_phase_files(
+        results_dir / LightModel.from_label(chosen.label).folder, results_dir / "light"
+    )
     write_json(
         results_dir / CHOICE_FILE if record_path is None else record_path,
         choice_record(found, chosen, threshold),
     )
     return chosen
+
+
+def copy_phase_files(source: Path, target: Path) -> None:
+    """Copy the phase files (:data:`PHASE_FILES`) that ``source`` holds into ``target``,
+    each atomically: a chosen candidate's folder into the folder the next phase reads."""
+    for name in PHASE_FILES:
+        if (source / name).is_file():
+            with atomic_path(target / name) as temporary:
+                shutil.copyfile(source / name, temporary)
 
 
 def holds_choice(results_dir: str | Path, chosen_label: str) -> bool:

@@ -461,16 +461,21 @@ class KMeansSourceModel:
 
     @classmethod
     def from_settings(
-        cls, pixel_x: np.ndarray, pixel_y: np.ndarray, adapt_image: np.ndarray, settings
+        cls,
+        pixel_x: np.ndarray,
+        pixel_y: np.ndarray,
+        adapt_image: np.ndarray,
+        settings,
+        n_pixels: int,
     ) -> "KMeansSourceModel":
-        """The k-means source of the phases on these pixels and adapt image, with the
-        pixel count, seed, scheme, interpolation, cross offset, adaptive signals, support
-        and seeding of ``settings`` (:class:`~mgelens.pipeline.settings.SlamSettings`)."""
+        """The k-means source of ``n_pixels`` pixels on these pixels and adapt image, with
+        the seed, scheme, interpolation, cross offset, adaptive signals, support and
+        seeding of ``settings`` (:class:`~mgelens.pipeline.settings.SlamSettings`)."""
         return cls(
             pixel_x,
             pixel_y,
             adapt_image,
-            settings.source_pixels,
+            n_pixels,
             settings.kmeans_seed,
             settings.kmeans_scheme,
             settings.interpolation,

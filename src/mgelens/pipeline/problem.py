@@ -100,6 +100,29 @@ class EarlierPhase:
         ``lens_light.smoothness``)."""
         return any(p.name == models.SMOOTHNESS for p in self.result.space.parameters)
 
+    def source_pixels(self, settings: SlamSettings) -> int:
+        """The k-means pixel count of this (SPix2's) source, which LIGHT and MASS keep.
+
+        Raises
+        ------
+        PhaseInputError
+            If the record has no k-means source, or its count is not among the settings'
+            ``source_pixels`` (SPix2 fitted with other settings).
+        """
+        source = self.record.get("source", {})
+        if source.get("mesh") != "kmeans":
+            raise PhaseInputError(
+                f"{self.folder / RESULT_FILE} has no k-means source: rerun phase 'spix2'"
+            )
+        n_pixels = int(source["n_pixels"])
+        if n_pixels not in settings.source_pixel_candidates:
+            raise PhaseInputError(
+                f"{self.folder / RESULT_FILE} was fitted with {n_pixels} source pixels but "
+                f"the settings ask for slam.source_pixels = {settings.source_pixels!r}: "
+                "rerun phase 'spix2' (and the phases after it) with these settings"
+            )
+        return n_pixels
+
     def check_lens_light(self, settings: SlamSettings, prior: bool = False) -> None:
         """Raise :class:`PhaseInputError` unless the phase used the settings' lens light
         and, with ``prior``, their ``lens_light_prior``."""
@@ -269,13 +292,13 @@ def sp_light_model(sp: EarlierPhase, source: models.SourceModel) -> models.Phase
 
 
 def kmeans_source(
-    dataset: FitDataset, results_dir: Path, settings: SlamSettings
+    dataset: FitDataset, results_dir: Path, settings: SlamSettings, n_pixels: int
 ) -> tuple[models.KMeansSourceModel, Path]:
-    """SPix2's k-means source model on SPix1's adapt image, and the adapt image's path
-    (an input of SPix2, LIGHT and MASS)."""
+    """SPix2's k-means source model of ``n_pixels`` pixels on SPix1's adapt image, and the
+    adapt image's path (an input of SPix2, LIGHT and MASS)."""
     path = Path(results_dir) / "spix1" / ADAPT_IMAGE_FILE
     if not path.is_file():
         raise PhaseInputError(f"{path} not found: rerun phase 'spix1'")
     adapt = products.read_adapt_image(path, dataset.mask)
     x, y = dataset.pixel_centres
-    return models.KMeansSourceModel.from_settings(x, y, adapt, settings), path
+    return models.KMeansSourceModel.from_settings(x, y, adapt, settings, n_pixels), path

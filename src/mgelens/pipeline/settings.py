@@ -97,11 +97,15 @@ class SlamSettings:
         MASS keeps at LIGHT's maximum-likelihood value; the prior's terms join the log
         evidence. The workflow passes it to LIGHT and MASS only. Not with
         ``lens_light_model: sersic``.
-    source_pixels : int
-        k-means source pixels of SPix2, LIGHT and MASS (paper 1500).
+    source_pixels : int or tuple of int
+        k-means source pixels of SPix2, LIGHT and MASS (paper 1500), or two or more
+        candidate counts (a YAML list, kept in increasing order), of which SPix2's
+        Bayesian evidence chooses one (:mod:`mgelens.pipeline.pixel_choice`): the
+        workflow fits SPix2 once per count and LIGHT and MASS keep the chosen SPix2's
+        count (:meth:`source_pixel_candidates`). SPix2 itself fits one count.
     mass_source_pixels : int or None
         k-means source pixels of MASS's meshes alone, with SPix2's hyper-parameters;
-        None (both profiles): ``source_pixels``. The workflow passes it to MASS only, so
+        None (both profiles): SPix2's count. The workflow passes it to MASS only, so
         setting it reruns MASS and what follows. At 500 pixels the mesh SPix2 tuned its
         hyper-parameters on stands far above other k-means seeds and the meshes' slopes
         differ (docs/coverage.md, "The source mesh").
@@ -201,7 +205,7 @@ class SlamSettings:
     profile: str = "quick"
     lens_light_model: str = "mge"
     lens_light_prior: str = "none"
-    source_pixels: int = 1500
+    source_pixels: int | tuple[int, ...] = 1500
     mass_source_pixels: int | None = None
     source_support: str = "mask"
     overlay_shape: tuple[int, int] = (34, 34)
@@ -245,10 +249,17 @@ class SlamSettings:
         object.__setattr__(self, "samplers", MappingProxyType(dict(self.samplers)))
 
     @property
-    def mass_pixels(self) -> int:
+    def source_pixel_candidates(self) -> tuple[int, ...]:
+        """The k-means pixel counts SPix2 may fit: ``source_pixels`` as a tuple (one count
+        where it is a single one), increasing."""
+        if isinstance(self.source_pixels, tuple):
+            return self.source_pixels
+        return (self.source_pixels,)
+
+    def mass_pixels(self, spix2_pixels: int) -> int:
         """k-means source pixels of MASS's meshes: ``mass_source_pixels``, or
-        ``source_pixels`` where it is None."""
-        return self.source_pixels if self.mass_source_pixels is None else self.mass_source_pixels
+        ``spix2_pixels`` (the count of the SPix2 result MASS reads) where it is None."""
+        return spix2_pixels if self.mass_source_pixels is None else self.mass_source_pixels
 
     def to_dict(self) -> dict:
         """JSON-ready form (recorded in every result file)."""
@@ -274,6 +285,7 @@ def _checked_fields(settings: SlamSettings) -> dict:
             checked[name] = values.number(key, value, **_NUMBERS[name])
         elif f.type is bool:
             checked[name] = values.boolean(key, value)
+    checked["source_pixels"] = _pixel_counts(settings.source_pixels)
     if settings.mass_source_pixels is not None:
         checked["mass_source_pixels"] = values.integer(
             "slam.mass_source_pixels", settings.mass_source_pixels, 3
@@ -306,8 +318,23 @@ _CHOICES = {
     "kmeans_seeding": KMEANS_SEEDINGS,
 }
 """Fields taking one of a few strings."""
+
+
+def _pixel_counts(value) -> int | tuple[int, ...]:
+    """``slam.source_pixels`` as an int >= 3, or a list of two or more distinct ones as
+    an increasing tuple."""
+    if not isinstance(value, list | tuple):
+        return values.integer("slam.source_pixels", value, 3)
+    counts = sorted({values.integer("slam.source_pixels", n, 3) for n in value})
+    if len(counts) < 2:
+        raise ValueError(
+            f"slam.source_pixels must be an integer >= 3 or a list of two or more distinct "
+            f"ones (candidates chosen by SPix2's evidence), got {value!r}"
+        )
+    return tuple(counts)
+
+
 _INTEGERS = {
-    "source_pixels": 3,
     "kmeans_seed": 0,
     "mass_meshes": 1,
 }

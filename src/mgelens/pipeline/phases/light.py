@@ -56,7 +56,9 @@ def problem(
     sp, spix1, spix2 = earlier_phases(results_dir, settings, "sp", "spix1", "spix2")
     sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, lens, models.light_centre(sp.result))
-    kmeans, adapt_path = kmeans_source(dataset, results_dir, settings)
+    kmeans, adapt_path = kmeans_source(
+        dataset, results_dir, settings, spix2.source_pixels(settings)
+    )
     source = kmeans.fixed(spix2.result.max_likelihood)
     specs = (
         models.sersic_specs(3)

@@ -2,7 +2,6 @@
 lens light (LIGHT) and source (SPix2) fixed: 8 free parameters; the 3×Sérsic chain fits
 LIGHT's Sérsics together with the mass."""
 
-import dataclasses
 from pathlib import Path
 
 from mgelens.pipeline import models
@@ -66,13 +65,13 @@ def problem(
     lens_dir: Path, results_dir: Path, settings: SlamSettings, lens: LensSpec
 ) -> PhaseProblem:
     """MASS: lens light (LIGHT) and source (SPix2's hyper-parameters, on
-    ``settings.mass_pixels`` k-means pixels) fixed, EPL + shear (8); the 3×Sérsic
+    ``settings.mass_pixels`` of SPix2's k-means pixels) fixed, EPL + shear (8); the 3×Sérsic
     chain fits LIGHT's Sérsics together with the mass (22)."""
     sp, spix1, spix2, light = earlier_phases(results_dir, settings, "sp", "spix1", "spix2", "light")
     light.check_lens_light(settings, prior=True)
     dataset, radius = load_dataset(lens_dir, settings, lens, models.light_centre(light.result))
-    mesh_settings = dataclasses.replace(settings, source_pixels=settings.mass_pixels)
-    kmeans, adapt_path = kmeans_source(dataset, results_dir, mesh_settings)
+    n_pixels = settings.mass_pixels(spix2.source_pixels(settings))
+    kmeans, adapt_path = kmeans_source(dataset, results_dir, settings, n_pixels)
     source = kmeans.fixed(spix2.result.max_likelihood)
     earlier = (*sp.files, *spix1.files, *spix2.files, *light.files, adapt_path)
     return PhaseProblem(

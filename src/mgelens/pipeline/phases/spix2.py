@@ -6,6 +6,7 @@ from pathlib import Path
 
 from mgelens.pipeline import models
 from mgelens.pipeline.problem import (
+    PhaseInputError,
     PhaseProblem,
     earlier_phases,
     imaging_files,
@@ -50,7 +51,14 @@ def problem(
     sp, spix1 = earlier_phases(results_dir, settings, "sp", "spix1")
     sp.check_lens_light(settings)
     dataset, radius = load_dataset(lens_dir, settings, lens, models.light_centre(sp.result))
-    source, adapt_path = kmeans_source(dataset, results_dir, settings)
+    if len(settings.source_pixel_candidates) > 1:
+        raise PhaseInputError(
+            f"SPix2 fits one source pixel count, but slam.source_pixels is "
+            f"{list(settings.source_pixels)}: fit each count into its own folder "
+            '(mgelens phase spix2 --folder spix2_n<count> --slam \'{"source_pixels": '
+            "<count>, ...}') and choose with mgelens choose --source-pixels, as the workflow does"
+        )
+    source, adapt_path = kmeans_source(dataset, results_dir, settings, settings.source_pixels)
     return PhaseProblem(
         "spix2",
         dataset,
