@@ -312,7 +312,10 @@ def _solve(
         input_checksums=checksums,
     )
     values = best_problem.space.values(output.max_likelihood())
-    best = fit(best_problem.dataset, best_problem.model.build(values))
+    # the sampler's own warm start: the refit takes the NNLS path that scored the sample
+    # (from the default start an ill-conditioned passive block can fail to factorise)
+    passive_start = reference_passive_set(best_problem)
+    best = fit(best_problem.dataset, best_problem.model.build(values), passive_start)
     record = fit_record(best, best_problem.model, values)
     if isinstance(best.model.source, MGESource):
         record["positions"] = image_positions(best, settings).describe()
