@@ -141,9 +141,12 @@ FITS = {
 SHAPE, PIXEL, RADIUS = (41, 41), 0.1, 1.8
 
 
-def light_record(names):
+def light_record(names, n_pixels=500):
     kind = "sersic" if names[0].startswith("sersic") else "mge"
-    return {"lens_light": {"components": [{"name": n, "kind": kind} for n in names]}}
+    return {
+        "lens_light": {"components": [{"name": n, "kind": kind} for n in names]},
+        "source": {"kind": "pixelized", "mesh": "kmeans", "n_pixels": n_pixels},
+    }
 
 
 def write_lens_folder(root, lens, theta, q, slope, names, measured, flag):
@@ -222,6 +225,7 @@ def test_lens_table_converts_and_compares(lens_folders, reference):
     assert list(table.columns) == [c for c in (*TABLE_COLUMNS, *FIT_COLUMNS) if c != "lens"]
     sie = table.loc["slacs0029-0055"]
     assert sie["light_model"] == "X2+point"
+    assert (sie["source_pixels"], sie["source_pixels_chosen_by"]) == (500, "config")
     assert sie["theta_e"] == 1.0
     assert sie["theta_e_err_lo"] == pytest.approx(0.02)
     assert sie["theta_e_err_hi"] == pytest.approx(0.02)
@@ -501,3 +505,25 @@ def test_a_summary_written_before_the_source_share_reads_as_undefined(summaries)
     row = sample_table(summaries).set_index("lens").loc[content["lens"]]
     assert math.isnan(row["a4_a_source_share"])
     assert row["delta_q_max"] == pytest.approx(LENSES[content["lens"]][0])
+
+
+def test_lens_table_says_where_the_source_pixel_count_came_from(lens_folders, reference):
+    """``source_pixels_chosen_by`` is ``evidence`` while spix2/ holds the candidate that
+    ``source_pixels_choice.json`` chose, ``config`` once SPix2 is fitted with one count."""
+    lens = lens_folders[0].parent
+    result = lens / "mass" / "result.json"
+    write_json(
+        result,
+        {
+            **json.loads(result.read_text()),
+            "max_likelihood_fit": light_record(("set_0", "set_1"), 1000),
+        },
+    )
+    for name in ("spix2", "spix2_n1000"):
+        write_json(lens / name / "result.json", {"log_evidence": 2.0})
+    write_json(lens / "source_pixels_choice.json", {"chosen": 1000, "candidates": []})
+    row = lens_table(lens_folders, reference).set_index("lens").loc[lens.name]
+    assert (row["source_pixels"], row["source_pixels_chosen_by"]) == (1000, "evidence")
+    write_json(lens / "spix2" / "result.json", {"log_evidence": 3.0})
+    row = lens_table(lens_folders, reference).set_index("lens").loc[lens.name]
+    assert row["source_pixels_chosen_by"] == "config"

@@ -49,6 +49,11 @@ light_evidence_margin           ln Z of the chosen candidate minus the highest l
                                 others (NaN when pinned; negative when a simpler model
                                 within the threshold was taken; a lower bound where the
                                 others' ln Z are upper bounds, ``light_models.csv``)
+source_pixels                   k-means source pixels of MASS's meshes
+source_pixels_chosen_by         ``evidence`` (SPix2 fitted per count of a
+                                ``slam.source_pixels`` list,
+                                ``source_pixels_choice.json`` next to the summary) or
+                                ``config`` (one count set)
 theta_e                         θ_E^AG (arcsec), MASS posterior median
 theta_e_err_lo, theta_e_err_hi  its 1σ (68.27 %) errors: median − lower, upper − median
 theta_e_lt                      θ_E^LT = θ_E^AG √q (2/(1+q))^{1/(γ−1)}, arcsec (SPEC §3.3),
@@ -114,6 +119,7 @@ import pandas as pd
 
 from mgelens import CONVENTIONS_VERSION, __version__
 from mgelens.isophotes import IsophoteStatistics, MassShape
+from mgelens.pipeline import pixel_choice
 from mgelens.pipeline.model_choice import CHOICE_FILE, holds_choice
 from mgelens.pipeline.records import (
     PhaseInputError,
@@ -156,6 +162,8 @@ FIT_COLUMNS = (
     "light_model",
     "light_chosen_by",
     "light_evidence_margin",
+    "source_pixels",
+    "source_pixels_chosen_by",
     *(f"{name}{suffix}" for name in ("theta_e", "theta_e_lt", "slope")
       for suffix in ("", "_err_lo", "_err_hi")),
     "bolton_b_sie",
@@ -390,6 +398,9 @@ def _fit_row(lens_folder: Path) -> dict:
         posterior = posterior_einstein_radius(pd.read_csv(mass / SAMPLES_FILE))
         quality = json.loads((lens_folder / QUALITY_FILE).read_text())
         row = {"light_model": light_model_label(record), **_choice_columns(lens_folder, record)}
+        row["source_pixels"] = int(record["source"]["n_pixels"])
+        chosen = pixel_choice.holds_choice(lens_folder)
+        row["source_pixels_chosen_by"] = "config" if chosen is None else "evidence"
         for name in ("theta_e", "theta_e_lt", "slope"):
             median = posterior[name]
             row[name] = median

@@ -134,3 +134,31 @@ def adopt(
         },
     )
     return chosen
+
+
+def holds_choice(results_dir: str | Path) -> int | None:
+    """The count of ``results_dir``'s ``source_pixels_choice.json`` if ``spix2/`` still
+    holds that candidate (its ``result.json`` byte-identical to the candidate's); None
+    without the record, or where SPix2 has since been fitted with one count set in the
+    settings (the record then describes a choice LIGHT and MASS no longer read).
+
+    Raises
+    ------
+    ValueError
+        If the record is not JSON or lacks ``chosen``.
+    """
+    results_dir = Path(results_dir)
+    path = results_dir / CHOICE_FILE
+    if not path.is_file():
+        return None
+    try:
+        chosen = int(json.loads(path.read_text())["chosen"])
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
+        raise ValueError(
+            f"{path}: not a source-pixel choice record ({error!r}); rerun choose_source_pixels"
+        ) from None
+    adopted = results_dir / "spix2" / RESULT_FILE
+    candidate = results_dir / folder(chosen) / RESULT_FILE
+    if not (adopted.is_file() and candidate.is_file()):
+        return None
+    return chosen if adopted.read_bytes() == candidate.read_bytes() else None
