@@ -78,6 +78,16 @@ def test_a_missing_or_mismatched_candidate_names_the_fix(tmp_path):
 
 
 # -- candidates fitted by the chain ------------------------------------------------------
+def choose_pixels(results, record_path, *arguments):
+    """``mgelens choose --source-pixels`` on ``results``: counts, then options."""
+    counts = [str(a) for a in arguments if isinstance(a, int)]
+    options = [a for a in arguments if isinstance(a, str)]
+    return main(
+        ["choose", "--results", str(results), "--source-pixels", *counts,
+         "--record", str(record_path), *options]
+    )  # fmt: skip
+
+
 @pytest.fixture(scope="module")
 def pixel_run(mock_dir, tmp_path_factory):  # noqa: F811
     """SP, SPix1, and SPix2 once per count of :data:`COUNTS` in its own folder."""
@@ -108,23 +118,7 @@ def test_choose_adopts_the_evidence_s_count_and_light_and_mass_keep_it(
     LIGHT and MASS build SPix2's count whatever candidate list the settings give; a count
     the settings do not allow is refused."""
     record_path = tmp_path / "choice.json"
-    counts = [str(n) for n in COUNTS]
-    assert (
-        main(
-            [
-                "choose",
-                "--results",
-                str(pixel_run),
-                "--source-pixels",
-                *counts,
-                "--threshold",
-                "0",
-                "--record",
-                str(record_path),
-            ]
-        )
-        == 0
-    )
+    assert choose_pixels(pixel_run, record_path, *COUNTS, "--threshold", "0") == 0
     record = json.loads(record_path.read_text())
     found = {c["n_pixels"]: c["log_evidence"] for c in record["candidates"]}
     assert found == {
@@ -160,19 +154,5 @@ def test_choose_adopts_the_evidence_s_count_and_light_and_mass_keep_it(
 
 
 def test_choose_refuses_a_candidate_not_fitted(pixel_run, tmp_path):
-    assert (
-        main(
-            [
-                "choose",
-                "--results",
-                str(pixel_run),
-                "--source-pixels",
-                "40",
-                "55",
-                "--record",
-                str(tmp_path / "c.json"),
-            ]
-        )
-        == 1
-    )
+    assert choose_pixels(pixel_run, tmp_path / "c.json", 40, 55) == 1
     assert not (tmp_path / "c.json").exists()

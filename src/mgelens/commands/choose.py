@@ -77,37 +77,26 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.source_pixels:
-        return _choose_pixels(args)
     try:
-        models = [LightModel.from_label(label) for label in args.candidates]
-        chosen = adopt(args.results, models, args.threshold, args.record)
+        if args.source_pixels:
+            chosen = pixel_choice.adopt(
+                args.results, args.source_pixels, args.threshold, args.record
+            )
+            what, name, folder = "source pixels", str(chosen.n_pixels), "spix2"
+        else:
+            models = [LightModel.from_label(label) for label in args.candidates]
+            chosen = adopt(args.results, models, args.threshold, args.record)
+            what, name, folder = "LIGHT model", chosen.label, "light"
     except (ValueError, OSError) as error:
         logger.error("choose: %s", error)
         return 1
     logger.info(
-        "%s: LIGHT model %s (ln Z = %.2f) among %s; copied to %s",
+        "%s: %s %s (ln Z = %.2f) among %s; copied to %s",
         args.results,
-        chosen.label,
+        what,
+        name,
         chosen.log_evidence,
-        ", ".join(args.candidates),
-        args.results / "light",
-    )
-    return 0
-
-
-def _choose_pixels(args: argparse.Namespace) -> int:
-    try:
-        chosen = pixel_choice.adopt(args.results, args.source_pixels, args.threshold, args.record)
-    except (ValueError, OSError) as error:
-        logger.error("choose: %s", error)
-        return 1
-    logger.info(
-        "%s: %d source pixels (ln Z = %.2f) among %s; copied to %s",
-        args.results,
-        chosen.n_pixels,
-        chosen.log_evidence,
-        ", ".join(str(n) for n in args.source_pixels),
-        args.results / "spix2",
+        ", ".join(str(c) for c in args.source_pixels or args.candidates),
+        args.results / folder,
     )
     return 0
