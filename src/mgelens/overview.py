@@ -309,8 +309,8 @@ def overview_from_fit(
     Parameters
     ----------
     result : FitResult
-        ``fit(problem.dataset, problem.model.build(values))``
-        (:func:`mgelens.pipeline.run.max_likelihood_problem`).
+        :func:`mgelens.pipeline.run.scored_fit` of the problem and values of
+        :func:`mgelens.pipeline.run.max_likelihood_problem`.
     component_names : sequence of str
         Names of the solved lens-light components (``spec.name`` of the phase model's
         ``lens_light``), in order.

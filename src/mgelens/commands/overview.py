@@ -17,12 +17,12 @@ import logging
 from pathlib import Path
 
 from mgelens.commands import add_threads_argument, make_output_folders, read_phase
-from mgelens.fit import FitError, fit
+from mgelens.fit import FitError
 from mgelens.imaging_input import ImagingError
 from mgelens.overview import overview_from_fit
 from mgelens.pipeline.models import UnphysicalSample
 from mgelens.pipeline.records import PhaseInputError, recorded_lens
-from mgelens.pipeline.run import max_likelihood_problem
+from mgelens.pipeline.run import max_likelihood_problem, scored_fit
 from mgelens.plot import save_png
 from mgelens.plot.overview import overview_figure
 from mgelens.threads import limit_threads
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         make_output_folders(args.out)
         phase = read_phase(args.phase)
         problem, values = max_likelihood_problem(phase, args.lens_dir, args.phase.parent)
-        result = fit(problem.dataset, problem.model.build(values))
+        result = scored_fit(problem, values)
         overview = overview_from_fit(
             result,
             [spec.name for spec in problem.model.lens_light],

@@ -150,6 +150,15 @@ def reference_passive_set(problem: PhaseProblem) -> np.ndarray | None:
     return reference.passive_set
 
 
+def scored_fit(problem: PhaseProblem, values: dict[str, float]) -> FitResult:
+    """The fit of ``values`` as the phase's sampler scored it: the NNLS warm-started from
+    :func:`reference_passive_set`. The constrained minimum is unique, so this is the fit
+    from the default start to rounding, except where that start's passive blocks are too
+    ill-conditioned to factorise, which the sampler's start avoided (a phase's written
+    maximum, its overview and recovery refits)."""
+    return fit(problem.dataset, problem.model.build(values), reference_passive_set(problem))
+
+
 def sampler_for(settings: SamplerSettings, n_free: int) -> SamplerSettings:
     """``settings`` made runnable for ``n_free`` free parameters: dynesty's live points
     are raised to 2 n_free + 2 if fewer (dynesty calls n_live ≤ 2 n_dim "extremely
@@ -312,10 +321,7 @@ def _solve(
         input_checksums=checksums,
     )
     values = best_problem.space.values(output.max_likelihood())
-    # the sampler's own warm start: the refit takes the NNLS path that scored the sample
-    # (from the default start an ill-conditioned passive block can fail to factorise)
-    passive_start = reference_passive_set(best_problem)
-    best = fit(best_problem.dataset, best_problem.model.build(values), passive_start)
+    best = scored_fit(best_problem, values)
     record = fit_record(best, best_problem.model, values)
     if isinstance(best.model.source, MGESource):
         record["positions"] = image_positions(best, settings).describe()
@@ -762,10 +768,10 @@ def max_likelihood_problem(
 ) -> tuple[PhaseProblem, dict[str, float]]:
     """The problem of a finished phase's maximum-likelihood fit and that fit's values.
 
-    ``fit(problem.dataset, problem.model.build(values))`` is the fit of the phase's
-    ``model.fits``: the problem is rebuilt from the settings recorded in ``result.json``
-    (in a pooled MASS phase, with the k-means seed of the mesh whose run holds the
-    highest-likelihood sample) and the earlier phases' files in ``results_dir``.
+    :func:`scored_fit` of them is the fit of the phase's ``model.fits``: the problem is
+    rebuilt from the settings recorded in ``result.json`` (in a pooled MASS phase, with the
+    k-means seed of the mesh whose run holds the highest-likelihood sample) and the
+    earlier phases' files in ``results_dir``.
     """
     settings, lens = recorded_settings(phase.settings)
     best = [mesh for mesh in phase.settings.get("meshes", []) if mesh["holds_max_likelihood"]]
