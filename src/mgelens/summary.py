@@ -399,8 +399,8 @@ def _fit_row(lens_folder: Path) -> dict:
         quality = json.loads((lens_folder / QUALITY_FILE).read_text())
         row = {"light_model": light_model_label(record), **_choice_columns(lens_folder, record)}
         row["source_pixels"] = int(record["source"]["n_pixels"])
-        chosen = pixel_choice.holds_choice(lens_folder)
-        row["source_pixels_chosen_by"] = "config" if chosen is None else "evidence"
+        held = pixel_choice.holds_choice(lens_folder) is not None
+        row["source_pixels_chosen_by"] = "evidence" if held else "config"
         for name in ("theta_e", "theta_e_lt", "slope"):
             median = posterior[name]
             row[name] = median

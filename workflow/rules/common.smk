@@ -29,7 +29,7 @@ from mgelens.sheet import SheetError, read_sample_sheet
 
 validate(config, schema="../schemas/config.schema.yaml")
 try:  # stop before building the DAG if the slam: section is wrong, naming the key
-    settings_from_mapping(config["slam"], origin="config")
+    CONFIG_SETTINGS = settings_from_mapping(config["slam"], origin="config")
 except SettingsError as error:
     raise WorkflowError(str(error)) from None
 
@@ -294,8 +294,9 @@ def reference_tables() -> list[str]:
 
 def chain_cost_inputs(wildcards) -> list[str]:
     """The benchmark files of every lens's chain jobs (SP, SPix1, SPix2 or its candidates,
-    its LIGHT job or candidates, MASS) that the chain_cost step sums (mgelens.chain_cost), for the
-    sheet's current LIGHT models only, not files left from another configuration."""
+    its LIGHT job or candidates, MASS) that the chain_cost step sums (mgelens.chain_cost),
+    for the config's and the sheet's current models only, not files left from another
+    configuration."""
     files = []
     for lens in LENSES.index:
         models = lens_light_models(lens)
@@ -395,7 +396,7 @@ LIGHT_FOLDERS = "light_x[0-9]+(?:_point)?"
 """Folders of LIGHT candidates (mgelens.pipeline.model_choice.LightModel.folder)."""
 SPIX2_FOLDERS = f"{SPIX2_PREFIX}[0-9]+"
 """Folders of SPix2 candidates (mgelens.pipeline.pixel_choice.folder)."""
-SOURCE_PIXELS = settings_from_mapping(config["slam"]).source_pixel_candidates
+SOURCE_PIXELS = CONFIG_SETTINGS.source_pixel_candidates
 """The k-means pixel counts of the config: one, or the candidates that rule
 choose_source_pixels compares by SPix2's evidence (mgelens.pipeline.pixel_choice)."""
 CHOSEN_PIXELS = len(SOURCE_PIXELS) > 1

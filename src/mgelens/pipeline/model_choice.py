@@ -164,12 +164,8 @@ def choose(found: Sequence[Candidate], threshold: float = DEFAULT_THRESHOLD) -> 
         If a bounded candidate's bound comes within ``threshold`` of the highest sampled
         ln Z (a bound made against another candidate or threshold).
     """
-    if not found:
-        raise ValueError("no LIGHT candidate to choose from")
-    if not threshold >= 0.0:
-        raise ValueError(f"model-choice threshold must be a number >= 0, got {threshold!r}")
+    eligible = within_threshold(found, threshold, "LIGHT candidate to choose from")
     best = max(c.log_evidence for c in found)
-    eligible = [c for c in found if c.log_evidence >= best - threshold]
     reached = [c.label for c in eligible if c.bounded]
     if reached:
         raise ValueError(
@@ -178,6 +174,23 @@ def choose(found: Sequence[Candidate], threshold: float = DEFAULT_THRESHOLD) -> 
             "and fit them again (mgelens phase light without --bound-by)"
         )
     return min(eligible, key=lambda c: (c.n_linear, c.n_free))
+
+
+def within_threshold(found: Sequence, threshold: float, what: str) -> list:
+    """The candidates of ``found`` (each with a ``log_evidence``) whose ln Z is within
+    ``threshold`` of the highest.
+
+    Raises
+    ------
+    ValueError
+        With no candidate ("no ``what``"), or a threshold that is not a number >= 0.
+    """
+    if not found:
+        raise ValueError(f"no {what}")
+    if not threshold >= 0.0:
+        raise ValueError(f"model-choice threshold must be a number >= 0, got {threshold!r}")
+    best = max(c.log_evidence for c in found)
+    return [c for c in found if c.log_evidence >= best - threshold]
 
 
 def adopt(
@@ -221,8 +234,15 @@ def holds_choice(results_dir: str | Path, chosen_label: str) -> bool:
     file is missing.
     """
     results_dir = Path(results_dir)
-    adopted = results_dir / "light" / RESULT_FILE
-    candidate = results_dir / LightModel.from_label(chosen_label).folder / RESULT_FILE
+    return same_result(
+        results_dir / "light", results_dir / LightModel.from_label(chosen_label).folder
+    )
+
+
+def same_result(adopted: Path, candidate: Path) -> bool:
+    """Whether the phase folder ``adopted`` holds the ``result.json`` of ``candidate``
+    byte for byte (False if either is missing): a choice's copy still in place."""
+    adopted, candidate = adopted / RESULT_FILE, candidate / RESULT_FILE
     if not (adopted.is_file() and candidate.is_file()):
         return False
     return adopted.read_bytes() == candidate.read_bytes()

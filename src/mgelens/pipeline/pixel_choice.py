@@ -24,7 +24,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from mgelens.atomic import write_json
-from mgelens.pipeline.model_choice import DEFAULT_THRESHOLD, copy_phase_files
+from mgelens.pipeline.model_choice import (
+    DEFAULT_THRESHOLD,
+    copy_phase_files,
+    same_result,
+    within_threshold,
+)
 from mgelens.search.results import RESULT_FILE
 
 CHOICE_FILE = "source_pixels_choice.json"
@@ -100,12 +105,10 @@ def choose(found: Sequence[PixelCandidate], threshold: float = DEFAULT_THRESHOLD
     ValueError
         With no candidate, or a threshold that is not a number >= 0.
     """
-    if not found:
-        raise ValueError("no SPix2 candidate to choose a source pixel count from")
-    if not threshold >= 0.0:
-        raise ValueError(f"model-choice threshold must be a number >= 0, got {threshold!r}")
-    best = max(c.log_evidence for c in found)
-    return min((c for c in found if c.log_evidence >= best - threshold), key=lambda c: c.n_pixels)
+    eligible = within_threshold(
+        found, threshold, "SPix2 candidate to choose a source pixel count from"
+    )
+    return min(eligible, key=lambda c: c.n_pixels)
 
 
 def adopt(
@@ -157,8 +160,4 @@ def holds_choice(results_dir: str | Path) -> int | None:
         raise ValueError(
             f"{path}: not a source-pixel choice record ({error!r}); rerun choose_source_pixels"
         ) from None
-    adopted = results_dir / "spix2" / RESULT_FILE
-    candidate = results_dir / folder(chosen) / RESULT_FILE
-    if not (adopted.is_file() and candidate.is_file()):
-        return None
-    return chosen if adopted.read_bytes() == candidate.read_bytes() else None
+    return chosen if same_result(results_dir / "spix2", results_dir / folder(chosen)) else None

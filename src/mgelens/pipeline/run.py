@@ -155,7 +155,7 @@ def scored_fit(problem: PhaseProblem, values: dict[str, float]) -> FitResult:
     :func:`reference_passive_set`. The constrained minimum is unique, so this is the fit
     from the default start to rounding, except where that start's passive blocks are too
     ill-conditioned to factorise, which the sampler's start avoided (a phase's written
-    maximum, its overview and recovery refits)."""
+    maximum and its overview's refit)."""
     return fit(problem.dataset, problem.model.build(values), reference_passive_set(problem))
 
 
