@@ -100,8 +100,14 @@ STAGES = {
         ("system.py", "curvature_matrix", None),
         ("fit.py", "curvature", None),
         ("fit.py", "lens_light_dense_terms", None),
+        ("working_set.py", "fill", ("working_set.py", "solve_on_working_set")),
     ],
-    "nnls_and_log_dets": [("solve.py", "solve_linear_system", None)],
+    # with the working set (LIGHT), the NNLS includes the gradients of the columns off
+    # it and the rows of those that enter
+    "nnls_and_log_dets": [
+        ("solve.py", "solve_linear_system", None),
+        ("nnls.py", "reconstruction_positive_only", ("working_set.py", "solve_on_working_set")),
+    ],
 }
 
 

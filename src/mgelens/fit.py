@@ -25,6 +25,7 @@ from mgelens.grid import SubGrid, pixel_centres, sub_grid, to_native
 from mgelens.imaging import Imaging
 from mgelens.inversion.cholesky import InversionError
 from mgelens.inversion.evidence import (
+    log_det_cholesky,
     log_det_regularization,
     log_evidence,
     log_likelihood,
@@ -39,6 +40,7 @@ from mgelens.inversion.system import (
     data_vector,
     weighted_gram,
 )
+from mgelens.inversion.working_set import DenseSourceProblem, solve_on_working_set
 from mgelens.light import LightGrid, MGESet
 from mgelens.light_prior import MGESmoothnessPrior, PriorTerms
 from mgelens.mask import validate_mask
@@ -485,10 +487,12 @@ class SourceOperator:
 @dataclass(frozen=True, eq=False)
 class SourceSystem:
     """The parts of the linear system that depend on mass and source only: the operator,
-    F_SS + H (dense), ln det H and, where it is the cheaper route to F_LS, W B f."""
+    F_SS + H (dense) and its ln det, ln det H and, where it is the cheaper route to F_LS,
+    W B f."""
 
     operator: SourceOperator
     curvature_regularization: np.ndarray
+    log_det_curvature_regularization: float
     log_det_regularization: float
     weighted_blurred: WeightedBlurredMapping | None
 
@@ -505,12 +509,22 @@ class SourceSystem:
             if WeightedBlurredMapping.cheaper(blurred, operator.mapping, dataset.convolver)
             else None
         )
-        return cls(operator, f_ss, log_det_regularization(h), weighted_blurred)
+        return cls(
+            operator, f_ss, log_det_cholesky(f_ss), log_det_regularization(h), weighted_blurred
+        )
+
+    def lens_source(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
+        """F_LS (n_dense, n_source) of dense columns L of ``dataset``: Lᵀ (W B f) in one
+        sparse pass where that is cheaper (large full-rank PSFs), else (fᵀ Bᵀ W L)ᵀ, a
+        transposed blur, then a sparse product."""
+        if self.weighted_blurred is None:
+            terms = DenseTerms.build(dense, dataset.inverse_variance, dataset.convolver)
+            return terms.lens_source(self.operator.mapping)
+        return self.weighted_blurred.lens_source(dense)
 
     def curvature(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
         """The full [dense | source] matrix F + H for new ``dense`` columns L of
-        ``dataset``. F_LS = Lᵀ (W B f) in one sparse pass where that is cheaper (large
-        full-rank PSFs), else (fᵀ Bᵀ W L)ᵀ: a transposed blur, then a sparse product."""
+        ``dataset`` (F_LS as :meth:`lens_source`'s)."""
         n_dense = dense.shape[1]
         q = np.empty((n_dense + self.curvature_regularization.shape[0],) * 2)
         if self.weighted_blurred is None:
@@ -595,30 +609,43 @@ def fit(
         )
     if dense.shape[1] == 0 and operator is None:
         raise ValueError("the model has no linear light: give it lens light or a source")
-    q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
-    prior = None
-    if model.lens_light_prior is not None:
-        prior = model.lens_light_prior.system(model.lens_light, dataset.median_inverse_variance)
-        log_det_prior_block = prior.add_to(q)
     if passive_start is not None and operator is not None and operator.support is not None:
         n_dense = dense.shape[1]
         passive_start = np.concatenate(
             [passive_start[:n_dense], passive_start[n_dense:][operator.support]]
         )
     settings = dataset.settings
-    fixed_zero = None
     constrained_source = settings.positive_only and not settings.free_source
-    if operator is not None and constrained_source and settings.force_edge_pixels_to_zero:
-        fixed_zero = np.concatenate([np.zeros(dense.shape[1], dtype=bool), operator.edge_pixels])
-    solution = solve_linear_system(
-        q,
-        d,
-        positive_only=settings.positive_only,
-        fixed_zero=fixed_zero,
-        source_block=slice(dense.shape[1], None) if operator is not None else None,
-        passive_start=passive_start,
-        unconstrained=slice(lens_columns.shape[1], None) if settings.free_source else None,
+    edge_zero = (
+        operator.edge_pixels
+        if operator is not None and constrained_source and settings.force_edge_pixels_to_zero
+        else None
     )
+    prior = None
+    if (
+        passive_start is not None
+        and system is not None
+        and constrained_source
+        and model.lens_light_prior is None
+    ):
+        problem = _dense_source_problem(dataset, model, dense, fixed, system)
+        solution = solve_on_working_set(problem, passive_start, edge_zero)
+    else:
+        q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
+        if model.lens_light_prior is not None:
+            prior = model.lens_light_prior.system(model.lens_light, dataset.median_inverse_variance)
+            log_det_prior_block = prior.add_to(q)
+        solution = solve_linear_system(
+            q,
+            d,
+            positive_only=settings.positive_only,
+            fixed_zero=None
+            if edge_zero is None
+            else np.r_[np.zeros(dense.shape[1], bool), edge_zero],
+            source_block=slice(dense.shape[1], None) if operator is not None else None,
+            passive_start=passive_start,
+            unconstrained=slice(lens_columns.shape[1], None) if settings.free_source else None,
+        )
     result = _scored(
         dataset, model, solution, fixed, lens_columns, source_columns, operator, system
     )
@@ -682,6 +709,32 @@ def _normal_equations(dataset, model, dense, fixed, operator, system):
         q = system.curvature(dense, dataset)
     q[np.arange(n_dense), np.arange(n_dense)] += dataset.settings.mge_diagonal
     return q, d
+
+
+def _dense_source_problem(dataset, model, dense, fixed, system) -> DenseSourceProblem:
+    """The [dense | source pixels] problem of a fit whose mass and source repeat (LIGHT),
+    in the parts :func:`~mgelens.inversion.working_set.solve_on_working_set` fills Q
+    from: ``system``'s F_SS + H and its ln det, and F_LS per dense column."""
+    residual = dataset.data - fixed
+    source_data = data_vector(
+        dense[:, :0],
+        system.operator.mapping,
+        dataset.source_psf_operator,
+        dataset.inverse_variance,
+        residual,
+        None if model.fixed_light else dataset.blurred_weighted_data,
+    )
+    return DenseSourceProblem(
+        dense=dense,
+        inverse_variance=dataset.inverse_variance,
+        residual=residual,
+        dense_diagonal=dataset.settings.mge_diagonal,
+        source_block=system.curvature_regularization,
+        source_data=source_data,
+        lens_source=lambda columns: system.lens_source(dense[:, columns], dataset),
+        source_image=system.operator.image,
+        log_det_source=system.log_det_curvature_regularization,
+    )
 
 
 def _scored(dataset, model, solution, fixed, lens_columns, source_columns, operator, system):
