@@ -72,7 +72,8 @@ def test_working_set_solve_matches_scipy_nnls_from_any_start(start):
     objective = solution.x @ q @ solution.x - 2 * d @ solution.x
     assert objective <= expected @ q @ expected - 2 * d @ expected + 1e-9 * abs(objective)
     sign, log_det = np.linalg.slogdet(problem.source_block)
-    assert sign > 0 and solution.log_det_source == pytest.approx(log_det, rel=1e-12)
+    assert sign > 0
+    assert solution.log_det_source == pytest.approx(log_det, rel=1e-12)
 
 
 def test_fixed_source_unknowns_stay_zero_and_the_rest_is_the_reduced_minimum():
