@@ -118,8 +118,7 @@ def light_fits():
     data = np.zeros(SHAPE)
     data[~blank.mask] = image
     models = [
-        LensModel(mass=MASS, lens_light=s, source=source)
-        for s in ((sets[0],), (sets[1],), sets)
+        LensModel(mass=MASS, lens_light=s, source=source) for s in ((sets[0],), (sets[1],), sets)
     ]
     return data, models, [fit(make_dataset(data), m) for m in models]
 
@@ -141,8 +140,6 @@ def test_light_fits_on_the_working_set_equal_the_full_solve(light_fits, edge_pix
             np.testing.assert_allclose(
                 reused.solution.x, full.solution.x, atol=1e-7 * full.solution.x.max()
             )
-            np.testing.assert_array_equal(
-                reused.solution.active_zero, reused.solution.x == 0.0
-            )
+            np.testing.assert_array_equal(reused.solution.active_zero, reused.solution.x == 0.0)
             if edge_pixels_zero:
                 assert np.all(reused.source.fluxes[reused.source.mesh.edge_pixels] == 0.0)
