@@ -67,12 +67,14 @@ NOMINAL_SMOOTHNESS = 100.0
 
 STAGES = {
     # stage: [(file, function, caller as (file, function), or None for any caller)]
+    # LIGHT's working set blurs the lens-light columns it fills inside the curvature
+    # (the warm start's) and NNLS (the entering ones) stages
     "lens_light_columns": [
         ("light.py", "columns", ("light.py", "<listcomp>")),
-        ("light.py", "columns", ("light.py", "blurred_columns")),
+        ("light.py", "columns", ("light.py", "_closed_form_and_on_grid")),
     ],
     "lens_light_closed_form": [
-        ("light.py", "blurred_gaussian_columns", ("light.py", "blurred_columns"))
+        ("light.py", "blurred_gaussian_columns", ("light.py", "_closed_form_and_on_grid"))
     ],
     "lens_light_blur": [("convolve.py", "blur_columns", ("light.py", "blurred_columns"))],
     "source_mge_columns": [("light.py", "columns", ("fit.py", "<listcomp>"))],

@@ -16,6 +16,21 @@ N_PIXELS, N_DENSE, N_SOURCE = 400, 40, 30
 MU = 1e-3
 
 
+class ArrayColumns:
+    """Dense columns held as one array, with the interface of
+    :class:`mgelens.light.LazyBlurredColumns`."""
+
+    def __init__(self, array: np.ndarray):
+        self.array = array
+        self.n_columns = array.shape[1]
+
+    def columns(self, indices):
+        return self.array[:, indices]
+
+    def transposed_product(self, vector):
+        return self.array.T @ vector
+
+
 def synthetic_problem(seed: int):
     """A [dense | source] problem with known matrices: dense columns that overlap (as
     MGE Gaussians do), a random non-negative 'blurred mapping' S, H = 0.5 I, and data
@@ -31,7 +46,7 @@ def synthetic_problem(seed: int):
     data = dense @ truth + mapping @ rng.random(N_SOURCE) + rng.normal(0, 0.05, N_PIXELS)
     h = 0.5 * np.eye(N_SOURCE)
     problem = DenseSourceProblem(
-        dense=dense,
+        dense=ArrayColumns(dense),
         inverse_variance=weights,
         residual=data,
         dense_diagonal=MU,

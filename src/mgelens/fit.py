@@ -514,17 +514,18 @@ class SourceSystem:
         )
 
     def lens_source(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
-        """F_LS (n_dense, n_source) of dense columns L of ``dataset``: Lᵀ (W B f) in one
-        sparse pass where that is cheaper (large full-rank PSFs), else (fᵀ Bᵀ W L)ᵀ, a
-        transposed blur, then a sparse product."""
-        if self.weighted_blurred is None:
-            terms = DenseTerms.build(dense, dataset.inverse_variance, dataset.convolver)
-            return terms.lens_source(self.operator.mapping)
-        return self.weighted_blurred.lens_source(dense)
+        """F_LS (n_dense, n_source) of a few dense columns L of ``dataset`` (those the
+        working set fills, :mod:`mgelens.inversion.working_set`): (fᵀ Bᵀ W L)ᵀ, a
+        transposed blur per column, then a sparse product. For a few columns this beats
+        :meth:`curvature`'s sparse pass over W B f, whose cost is mostly fixed
+        (docs/benchmarks.md, "The non-negative solve over a working set")."""
+        terms = DenseTerms.build(dense, dataset.inverse_variance, dataset.convolver)
+        return terms.lens_source(self.operator.mapping)
 
     def curvature(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
         """The full [dense | source] matrix F + H for new ``dense`` columns L of
-        ``dataset`` (F_LS as :meth:`lens_source`'s)."""
+        ``dataset``. F_LS = Lᵀ (W B f) in one sparse pass where that is cheaper (large
+        full-rank PSFs), else (fᵀ Bᵀ W L)ᵀ: a transposed blur, then a sparse product."""
         n_dense = dense.shape[1]
         q = np.empty((n_dense + self.curvature_regularization.shape[0],) * 2)
         if self.weighted_blurred is None:
@@ -597,8 +598,6 @@ def fit(
     Raises one of :data:`FitError` when the sample cannot be fitted (degenerate mesh,
     non-positive-definite system, NNLS iteration cap).
     """
-    fixed, lens_columns, source_columns = _dense_light(dataset, model)
-    dense = np.hstack([lens_columns, source_columns])
     operator = system = None
     if isinstance(model.source, PixelizedSource):
         system = dataset.repeated_source(model.mass, model.source)
@@ -607,10 +606,13 @@ def fit(
             if system is None
             else system.operator
         )
-    if dense.shape[1] == 0 and operator is None:
+    n_lens = sum(c.n_columns for c in model.lens_light)
+    n_dense = n_lens + (
+        sum(s.n_columns for s in model.source.sets) if isinstance(model.source, MGESource) else 0
+    )
+    if n_dense == 0 and operator is None:
         raise ValueError("the model has no linear light: give it lens light or a source")
     if passive_start is not None and operator is not None and operator.support is not None:
-        n_dense = dense.shape[1]
         passive_start = np.concatenate(
             [passive_start[:n_dense], passive_start[n_dense:][operator.support]]
         )
@@ -621,33 +623,32 @@ def fit(
         if operator is not None and constrained_source and settings.force_edge_pixels_to_zero
         else None
     )
-    prior = None
     if (
         passive_start is not None
         and system is not None
         and constrained_source
         and model.lens_light_prior is None
     ):
-        problem = _dense_source_problem(dataset, model, dense, fixed, system)
-        solution = solve_on_working_set(problem, passive_start, edge_zero)
-    else:
-        q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
-        if model.lens_light_prior is not None:
-            prior = model.lens_light_prior.system(model.lens_light, dataset.median_inverse_variance)
-            log_det_prior_block = prior.add_to(q)
-        solution = solve_linear_system(
-            q,
-            d,
-            positive_only=settings.positive_only,
-            fixed_zero=None
-            if edge_zero is None
-            else np.r_[np.zeros(dense.shape[1], bool), edge_zero],
-            source_block=slice(dense.shape[1], None) if operator is not None else None,
-            passive_start=passive_start,
-            unconstrained=slice(lens_columns.shape[1], None) if settings.free_source else None,
-        )
+        return _fit_on_working_set(dataset, model, system, passive_start, edge_zero)
+    fixed, lens_columns, source_columns = _dense_light(dataset, model)
+    dense = np.hstack([lens_columns, source_columns])
+    q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
+    prior = None
+    if model.lens_light_prior is not None:
+        prior = model.lens_light_prior.system(model.lens_light, dataset.median_inverse_variance)
+        log_det_prior_block = prior.add_to(q)
+    solution = solve_linear_system(
+        q,
+        d,
+        positive_only=settings.positive_only,
+        fixed_zero=None if edge_zero is None else np.r_[np.zeros(n_dense, bool), edge_zero],
+        source_block=slice(n_dense, None) if operator is not None else None,
+        passive_start=passive_start,
+        unconstrained=slice(n_lens, None) if settings.free_source else None,
+    )
+    lens_light_image = lens_columns @ solution.x[:n_lens] + fixed
     result = _scored(
-        dataset, model, solution, fixed, lens_columns, source_columns, operator, system
+        dataset, model, solution, lens_light_image, n_lens, source_columns, operator, system
     )
     if prior is None:
         return result
@@ -659,14 +660,41 @@ def fit(
     )
 
 
+def _fit_on_working_set(dataset, model, system, passive_start, edge_zero) -> FitResult:
+    """:func:`fit` of a model whose mass and source repeat from the previous fit (LIGHT),
+    warm-started: the non-negative solve fills Q's lens-light rows, and blurs the
+    lens-light columns, only for the columns it brings in
+    (:mod:`mgelens.inversion.working_set`); the same minimum as the full solve."""
+    fixed = _fixed_light(dataset, model)
+    columns = dataset.light_grid.lazy_blurred_columns(list(model.lens_light))
+    problem = _dense_source_problem(dataset, model, columns, fixed, system)
+    solution = solve_on_working_set(problem, passive_start, edge_zero)
+    lit = np.flatnonzero(solution.x[: columns.n_columns])
+    lens_light_image = columns.columns(lit) @ solution.x[lit] + fixed
+    no_columns = np.zeros((dataset.data.size, 0))
+    return _scored(
+        dataset,
+        model,
+        solution,
+        lens_light_image,
+        columns.n_columns,
+        no_columns,
+        system.operator,
+        system,
+    )
+
+
+def _fixed_light(dataset: FitDataset, model: LensModel) -> np.ndarray:
+    """The fixed (non-linear) light's blurred image (N_I,), zero without any."""
+    if not model.fixed_light:
+        return np.zeros(dataset.data.size)
+    return dataset.light_grid.blurred_image(list(model.fixed_light))
+
+
 def _dense_light(dataset: FitDataset, model: LensModel) -> tuple[np.ndarray, ...]:
     """The fixed light's blurred image, and the blurred columns of the lens-light
     Gaussians and of the source Gaussians (empty when the model has none)."""
-    fixed = (
-        dataset.light_grid.blurred_image(list(model.fixed_light))
-        if model.fixed_light
-        else np.zeros(dataset.data.size)
-    )
+    fixed = _fixed_light(dataset, model)
     lens_columns = (
         dataset.lens_light_columns(tuple(model.lens_light))
         if model.lens_light
@@ -714,10 +742,11 @@ def _normal_equations(dataset, model, dense, fixed, operator, system):
 def _dense_source_problem(dataset, model, dense, fixed, system) -> DenseSourceProblem:
     """The [dense | source pixels] problem of a fit whose mass and source repeat (LIGHT),
     in the parts :func:`~mgelens.inversion.working_set.solve_on_working_set` fills Q
-    from: ``system``'s F_SS + H and its ln det, and F_LS per dense column."""
+    from: ``system``'s F_SS + H and its ln det, and F_LS per dense column of ``dense``
+    (:class:`mgelens.light.LazyBlurredColumns`)."""
     residual = dataset.data - fixed
     source_data = data_vector(
-        dense[:, :0],
+        np.zeros((residual.size, 0)),
         system.operator.mapping,
         dataset.source_psf_operator,
         dataset.inverse_variance,
@@ -731,19 +760,18 @@ def _dense_source_problem(dataset, model, dense, fixed, system) -> DenseSourcePr
         dense_diagonal=dataset.settings.mge_diagonal,
         source_block=system.curvature_regularization,
         source_data=source_data,
-        lens_source=lambda columns: system.lens_source(dense[:, columns], dataset),
+        lens_source=lambda indices: system.lens_source(dense.columns(indices), dataset),
         source_image=system.operator.image,
         log_det_source=system.log_det_curvature_regularization,
     )
 
 
-def _scored(dataset, model, solution, fixed, lens_columns, source_columns, operator, system):
-    """The :class:`FitResult` of a solution: images, χ², ln L and, for a pixelized
-    source, the log evidence and its terms (SPEC §7)."""
+def _scored(dataset, model, solution, lens_light_image, n_lens, source_columns, operator, system):
+    """The :class:`FitResult` of a solution with the lens-light image it makes (fixed
+    light included) and ``n_lens`` lens-light unknowns: images, χ², ln L and, for a
+    pixelized source, the log evidence and its terms (SPEC §7)."""
     x = solution.x
-    n_lens = lens_columns.shape[1]
     n_dense = n_lens + source_columns.shape[1]
-    lens_light_image = lens_columns @ x[:n_lens] + fixed
     lensed_source_image = source_columns @ x[n_lens:n_dense]
     if operator is not None:
         lensed_source_image = lensed_source_image + operator.image(x[n_dense:])

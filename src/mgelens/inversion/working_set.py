@@ -43,8 +43,11 @@ class DenseSourceProblem:
 
     Attributes
     ----------
-    dense : ndarray (N_I, n_dense)
-        Blurred dense columns L (lens-light Gaussians).
+    dense : LazyBlurredColumns-like
+        The blurred dense columns L (lens-light Gaussians): ``n_columns``,
+        ``columns(indices)`` → (N_I, k) and ``transposed_product(v)`` → Lᵀv (n_dense,)
+        (:class:`mgelens.light.LazyBlurredColumns`, which blurs a column only when it is
+        asked for)
     inverse_variance : ndarray (N_I,)
         w_i = 1/σ_i².
     residual : ndarray (N_I,)
@@ -65,7 +68,7 @@ class DenseSourceProblem:
         factorises the block.
     """
 
-    dense: np.ndarray
+    dense: object
     inverse_variance: np.ndarray
     residual: np.ndarray
     dense_diagonal: float
@@ -77,7 +80,7 @@ class DenseSourceProblem:
 
     @property
     def n_dense(self) -> int:
-        return self.dense.shape[1]
+        return self.dense.n_columns
 
 
 class _DenseColumnSupply:
@@ -94,8 +97,8 @@ class _DenseColumnSupply:
         unknown, each other and the source, and mark them filled."""
         p = self.problem
         filled = np.flatnonzero(~self.unknown[: p.n_dense])
-        new = p.dense[:, columns]
-        cross = (p.inverse_variance[:, None] * new).T @ p.dense[:, filled]
+        new = p.dense.columns(columns)
+        cross = (p.inverse_variance[:, None] * new).T @ p.dense.columns(filled)
         q[np.ix_(columns, filled)] = cross
         q[np.ix_(filled, columns)] = cross.T
         gram = weighted_gram(new, p.inverse_variance)
@@ -115,9 +118,9 @@ class _DenseColumnSupply:
         if candidates.size == 0:
             return candidates
         lit = np.flatnonzero(x[: p.n_dense])
-        model = p.dense[:, lit] @ x[lit] + p.source_image(x[p.n_dense :])
+        model = p.dense.columns(lit) @ x[lit] + p.source_image(x[p.n_dense :])
         weighted = self.weighted_residual - p.inverse_variance * model
-        gradient = (weighted @ p.dense)[candidates]
+        gradient = p.dense.transposed_product(weighted)[candidates]
         above = np.flatnonzero(gradient > tol)
         chosen = candidates[above[np.argsort(-gradient[above], kind="stable")[:k]]]
         self.fill(q, chosen)
@@ -162,7 +165,9 @@ def solve_on_working_set(
     start = np.array(passive_start, dtype=bool)
     supply.fill(q, np.flatnonzero(start[:n_dense]))
     start &= ~unknown
-    d = np.concatenate([problem.dense.T @ supply.weighted_residual, problem.source_data])
+    d = np.concatenate(
+        [problem.dense.transposed_product(supply.weighted_residual), problem.source_data]
+    )
     log_det_source = problem.log_det_source
     if log_det_source is None:
         factor = upper_cholesky(problem.source_block.copy())
