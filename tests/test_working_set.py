@@ -7,8 +7,10 @@ import scipy.linalg
 import scipy.optimize
 from test_fit import MASS, NOISE, SHAPE, lens_sets, make_dataset, pixelized_source
 
+from mgelens import fit as fit_module
 from mgelens.fit import LensModel, SourceSystem, fit
 from mgelens.fit_settings import FitSettings
+from mgelens.inversion.system import WeightedBlurredMapping
 from mgelens.inversion.working_set import DenseSourceProblem, solve_on_working_set
 from mgelens.source.regularization import ConstantSplit
 
@@ -139,7 +141,18 @@ def light_fits():
 
 
 @pytest.mark.parametrize("edge_pixels_zero", [False, True])
-def test_light_fits_on_the_working_set_equal_the_full_solve(light_fits, edge_pixels_zero):
+def test_light_fits_on_the_working_set_equal_the_full_solve(
+    light_fits, edge_pixels_zero, monkeypatch
+):
+    """The working set is taken where a pass over W B f is cheaper than blurring a column
+    (HST's PSF); the tests' small Gaussian PSF is made to take it too."""
+    monkeypatch.setattr(WeightedBlurredMapping, "cheaper", lambda *args: True)
+    taken = []
+    monkeypatch.setattr(
+        fit_module,
+        "solve_on_working_set",
+        lambda *args, **kwargs: taken.append(1) or solve_on_working_set(*args, **kwargs),
+    )
     data, models, _ = light_fits
     settings = FitSettings(lp_sub_size_centre=8, force_edge_pixels_to_zero=edge_pixels_zero)
     dataset = make_dataset(data, settings)
@@ -158,3 +171,16 @@ def test_light_fits_on_the_working_set_equal_the_full_solve(light_fits, edge_pix
             np.testing.assert_array_equal(reused.solution.active_zero, reused.solution.x == 0.0)
             if edge_pixels_zero:
                 assert np.all(reused.source.fluxes[reused.source.mesh.edge_pixels] == 0.0)
+    assert len(taken) == 2 * len(models)
+
+
+def test_a_separable_psf_keeps_the_full_solve(light_fits, monkeypatch):
+    """With a Gaussian PSF all columns blur in one batch for less than the working set's
+    blurs one by one: LIGHT's fits keep the full solve."""
+    monkeypatch.setattr(fit_module, "solve_on_working_set", None)  # would raise if called
+    data, models, _ = light_fits
+    dataset = make_dataset(data)
+    fit(dataset, models[0])
+    reused = fit(dataset, models[0], fit(make_dataset(data), models[0]).passive_set)
+    assert dataset._source_cache["system"].weighted_blurred is None
+    assert np.isfinite(reused.log_evidence)

@@ -626,6 +626,7 @@ def fit(
     if (
         passive_start is not None
         and system is not None
+        and system.weighted_blurred is not None
         and constrained_source
         and model.lens_light_prior is None
     ):
@@ -664,7 +665,11 @@ def _fit_on_working_set(dataset, model, system, passive_start, edge_zero) -> Fit
     """:func:`fit` of a model whose mass and source repeat from the previous fit (LIGHT),
     warm-started: the non-negative solve fills Q's lens-light rows, and blurs the
     lens-light columns, only for the columns it brings in
-    (:mod:`mgelens.inversion.working_set`); the same minimum as the full solve."""
+    (:mod:`mgelens.inversion.working_set`); the same minimum as the full solve. Taken
+    where blurring a column costs more than a pass over W B f
+    (:meth:`WeightedBlurredMapping.cheaper`: full-rank PSFs such as HST's); a separable
+    PSF blurs all the columns in one batch for less (docs/benchmarks.md, "The
+    non-negative solve over a working set")."""
     fixed = _fixed_light(dataset, model)
     columns = dataset.light_grid.lazy_blurred_columns(list(model.lens_light))
     problem = _dense_source_problem(dataset, model, columns, fixed, system)
