@@ -5,13 +5,16 @@ import numpy as np
 import pytest
 import scipy.linalg
 import scipy.optimize
-from test_fit import MASS, NOISE, SHAPE, lens_sets, make_dataset, pixelized_source
+from test_fit import MASS, NOISE, PIXEL, SHAPE, lens_sets, make_dataset, pixelized_source
 
 from mgelens import fit as fit_module
-from mgelens.fit import LensModel, SourceSystem, fit
+from mgelens.convolve import Convolver
+from mgelens.fit import LensModel, MGESource, SourceSystem, fit, source_light_columns
 from mgelens.fit_settings import FitSettings
+from mgelens.geometry import ell_comps_from
 from mgelens.inversion.system import WeightedBlurredMapping
 from mgelens.inversion.working_set import DenseSourceProblem, solve_on_working_set
+from mgelens.light import MGESet
 from mgelens.source.regularization import ConstantSplit
 
 N_PIXELS, N_DENSE, N_SOURCE = 400, 40, 30
@@ -54,7 +57,7 @@ def synthetic_problem(seed: int):
         dense_diagonal=MU,
         source_block=mapping.T @ (weights[:, None] * mapping) + h,
         source_data=mapping.T @ (weights * data),
-        lens_source=lambda columns: dense[:, columns].T @ (weights[:, None] * mapping),
+        lens_source=lambda columns: columns.T @ (weights[:, None] * mapping),
         source_image=lambda fluxes: mapping @ fluxes,
     )
     operator = np.hstack([dense, mapping])
@@ -109,15 +112,16 @@ def test_columns_off_the_start_are_filled_only_when_they_would_enter():
     problem, q, d = synthetic_problem(seed=3)
     requested = []
 
-    def counting(columns, inner=problem.lens_source):
-        requested.extend(columns.tolist())
-        return inner(columns)
+    class Counting(ArrayColumns):
+        def columns(self, indices):
+            requested.extend(np.asarray(indices).tolist())
+            return super().columns(indices)
 
-    counted = DenseSourceProblem(**{**vars(problem), "lens_source": counting})
+    counted = DenseSourceProblem(**{**vars(problem), "dense": Counting(problem.dense.array)})
     passive = np.ones(N_DENSE + N_SOURCE, dtype=bool)
     passive[:N_DENSE] = scipy_minimum(q, d)[:N_DENSE] > 0
     solution = solve_on_working_set(counted, passive)
-    assert len(requested) == len(set(requested)) == np.count_nonzero(passive[:N_DENSE])
+    assert sorted(requested) == np.flatnonzero(passive[:N_DENSE]).tolist()
     np.testing.assert_allclose(solution.x, scipy_minimum(q, d), atol=1e-8 * np.abs(d).max())
 
 
@@ -144,9 +148,10 @@ def light_fits():
 def test_light_fits_on_the_working_set_equal_the_full_solve(
     light_fits, edge_pixels_zero, monkeypatch
 ):
-    """The working set is taken where a pass over W B f is cheaper than blurring a column
-    (HST's PSF); the tests' small Gaussian PSF is made to take it too."""
-    monkeypatch.setattr(WeightedBlurredMapping, "cheaper", lambda *args: True)
+    """The working set is taken unless the PSF blurs by separable terms; the tests'
+    small Gaussian PSF is made to take it too, and both routes to F_LS are exercised."""
+    monkeypatch.setattr(Convolver, "route", lambda self, include_blurring: "fft")
+    monkeypatch.setattr(WeightedBlurredMapping, "cheaper", lambda *args: edge_pixels_zero)
     taken = []
     monkeypatch.setattr(
         fit_module,
@@ -175,12 +180,40 @@ def test_light_fits_on_the_working_set_equal_the_full_solve(
 
 
 def test_a_separable_psf_keeps_the_full_solve(light_fits, monkeypatch):
-    """With a Gaussian PSF all columns blur in one batch for less than the working set's
-    blurs one by one: LIGHT's fits keep the full solve."""
+    """With a Gaussian PSF all columns blur in one batch for little more than one: the
+    fits keep the full solve."""
     monkeypatch.setattr(fit_module, "solve_on_working_set", None)  # would raise if called
     data, models, _ = light_fits
     dataset = make_dataset(data)
+    assert dataset.convolver.route(include_blurring=True) == "separable"
     fit(dataset, models[0])
     reused = fit(dataset, models[0], fit(make_dataset(data), models[0]).passive_set)
-    assert dataset._source_cache["system"].weighted_blurred is None
     assert np.isfinite(reused.log_evidence)
+
+
+def test_a_parametric_source_fit_on_the_working_set_equals_the_full_solve(monkeypatch):
+    """SP's pattern: lens-light and source Gaussians, no pixelized source; from a warm
+    start without any Gaussian (all brought in by their gradient) and from the full
+    solve's own passive set, the same intensities, χ² and ln L."""
+    monkeypatch.setattr(Convolver, "route", lambda self, include_blurring: "fft")
+    rng = np.random.default_rng(8)
+    blank = make_dataset()
+    sets = lens_sets()
+    source_sets = (MGESet.extended((0.05, 0.0), ell_comps_from(0.8, 20.0), PIXEL, 0.6, 10),)
+    lens = blank.lens_light_columns(sets) @ np.geomspace(5.0, 0.05, 20)
+    arcs = source_light_columns(blank, MASS, source_sets) @ np.geomspace(3.0, 0.3, 10)
+    data = np.zeros(SHAPE)
+    data[~blank.mask] = lens + arcs + rng.normal(0.0, NOISE, blank.data.size)
+    model = LensModel(mass=MASS, lens_light=sets, source=MGESource(source_sets))
+    full = fit(make_dataset(data), model)
+    empty = np.zeros(full.passive_set.size, dtype=bool)
+    for start in (full.passive_set, empty):
+        warm = fit(make_dataset(data), model, start)
+        assert warm.log_likelihood == pytest.approx(full.log_likelihood, rel=1e-11)
+        assert warm.log_evidence == warm.log_likelihood
+        assert warm.solution.log_det_source is None
+        np.testing.assert_allclose(
+            warm.solution.x, full.solution.x, atol=1e-7 * full.solution.x.max()
+        )
+        np.testing.assert_allclose(warm.lensed_source_image, full.lensed_source_image, atol=1e-9)
+        assert 0 < np.count_nonzero(warm.source_light_intensities) < 10

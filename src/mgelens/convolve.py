@@ -477,6 +477,11 @@ class Convolver:
         one multiply-add each for the direct and separable routes)."""
         return min(self._costs[include_blurring].values())
 
+    def route(self, include_blurring: bool) -> str:
+        """The method ``auto`` blurs columns of this input region by: "direct", "fft" or
+        "separable"."""
+        return self._method_for(include_blurring, "auto")
+
     def _method_for(self, include_blurring: bool, method: str) -> str:
         if method != "auto":
             return method

@@ -576,11 +576,17 @@ def pixelized_operator(dataset: FitDataset, mass, source: PixelizedSource) -> So
 
 def source_light_columns(dataset: FitDataset, mass, sets: tuple[MGESet, ...]) -> np.ndarray:
     """PSF-convolved unit columns (N_I, Σ N_g) of source-plane MGE sets seen through ``mass``."""
+    columns = _unblurred_source_light_columns(dataset, mass, sets)
+    return dataset.convolver.blur_columns(columns, include_blurring=True)
+
+
+def _unblurred_source_light_columns(dataset: FitDataset, mass, sets) -> np.ndarray:
+    """The columns of :func:`source_light_columns` before the PSF, binned on the mask ∪
+    blurring region (N_ext, Σ N_g)."""
     grid = dataset.light_grid.grid
     bx, by = mass_module.ray_trace(mass, grid.x, grid.y)
     traced = replace(grid, x=bx, y=by)
-    columns = np.concatenate([s.columns(traced) for s in sets], axis=1)
-    return dataset.convolver.blur_columns(columns, include_blurring=True)
+    return np.concatenate([s.columns(traced) for s in sets], axis=1)
 
 
 def fit(
@@ -625,12 +631,12 @@ def fit(
     )
     if (
         passive_start is not None
-        and system is not None
-        and system.weighted_blurred is not None
         and constrained_source
         and model.lens_light_prior is None
+        and (operator is None or system is not None)
+        and dataset.convolver.route(include_blurring=True) != "separable"
     ):
-        return _fit_on_working_set(dataset, model, system, passive_start, edge_zero)
+        return _fit_on_working_set(dataset, model, system, n_dense, passive_start, edge_zero)
     fixed, lens_columns, source_columns = _dense_light(dataset, model)
     dense = np.hstack([lens_columns, source_columns])
     q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
@@ -647,9 +653,16 @@ def fit(
         passive_start=passive_start,
         unconstrained=slice(n_lens, None) if settings.free_source else None,
     )
-    lens_light_image = lens_columns @ solution.x[:n_lens] + fixed
     result = _scored(
-        dataset, model, solution, lens_light_image, n_lens, source_columns, operator, system
+        dataset,
+        model,
+        solution,
+        lens_columns @ solution.x[:n_lens] + fixed,
+        source_columns @ solution.x[n_lens:n_dense],
+        n_lens,
+        n_dense,
+        operator,
+        system,
     )
     if prior is None:
         return result
@@ -661,30 +674,35 @@ def fit(
     )
 
 
-def _fit_on_working_set(dataset, model, system, passive_start, edge_zero) -> FitResult:
-    """:func:`fit` of a model whose mass and source repeat from the previous fit (LIGHT),
-    warm-started: the non-negative solve fills Q's lens-light rows, and blurs the
-    lens-light columns, only for the columns it brings in
-    (:mod:`mgelens.inversion.working_set`); the same minimum as the full solve. Taken
-    where blurring a column costs more than a pass over W B f
-    (:meth:`WeightedBlurredMapping.cheaper`: full-rank PSFs such as HST's); a separable
-    PSF blurs all the columns in one batch for less (docs/benchmarks.md, "The
+def _fit_on_working_set(dataset, model, system, n_dense, passive_start, edge_zero) -> FitResult:
+    """:func:`fit`, warm-started, of a model with no pixelized source (SP) or whose mass
+    and source repeat from the previous fit (LIGHT): the non-negative solve fills Q's
+    rows of the Gaussians (lens light and source MGE), and blurs their columns, only for
+    those it brings in (:mod:`mgelens.inversion.working_set`); the same minimum as the
+    full solve. Taken unless the PSF blurs by its separable terms (a Gaussian PSF), whose
+    batches of columns cost little more than one column (docs/benchmarks.md, "The
     non-negative solve over a working set")."""
     fixed = _fixed_light(dataset, model)
-    columns = dataset.light_grid.lazy_blurred_columns(list(model.lens_light))
+    source_on_grid = (
+        _unblurred_source_light_columns(dataset, model.mass, model.source.sets)
+        if isinstance(model.source, MGESource)
+        else None
+    )
+    columns = dataset.light_grid.lazy_blurred_columns(list(model.lens_light), source_on_grid)
     problem = _dense_source_problem(dataset, model, columns, fixed, system)
     solution = solve_on_working_set(problem, passive_start, edge_zero)
-    lit = np.flatnonzero(solution.x[: columns.n_columns])
-    lens_light_image = columns.columns(lit) @ solution.x[lit] + fixed
-    no_columns = np.zeros((dataset.data.size, 0))
+    n_lens = n_dense - (0 if source_on_grid is None else source_on_grid.shape[1])
+    x = solution.x
+    lens, source = np.flatnonzero(x[:n_lens]), n_lens + np.flatnonzero(x[n_lens:n_dense])
     return _scored(
         dataset,
         model,
         solution,
-        lens_light_image,
-        columns.n_columns,
-        no_columns,
-        system.operator,
+        columns.columns(lens) @ x[lens] + fixed,
+        columns.columns(source) @ x[source],
+        n_lens,
+        n_dense,
+        None if system is None else system.operator,
         system,
     )
 
@@ -745,11 +763,19 @@ def _normal_equations(dataset, model, dense, fixed, operator, system):
 
 
 def _dense_source_problem(dataset, model, dense, fixed, system) -> DenseSourceProblem:
-    """The [dense | source pixels] problem of a fit whose mass and source repeat (LIGHT),
-    in the parts :func:`~mgelens.inversion.working_set.solve_on_working_set` fills Q
-    from: ``system``'s F_SS + H and its ln det, and F_LS per dense column of ``dense``
+    """The [Gaussians | source pixels] problem of a fit with no pixelized source
+    (``system`` None) or whose mass and source repeat (LIGHT), in the parts
+    :func:`~mgelens.inversion.working_set.solve_on_working_set` fills Q from:
+    ``system``'s F_SS + H and its ln det, and F_LS per column of ``dense``
     (:class:`mgelens.light.LazyBlurredColumns`)."""
     residual = dataset.data - fixed
+    if system is None:
+        return DenseSourceProblem(
+            dense=dense,
+            inverse_variance=dataset.inverse_variance,
+            residual=residual,
+            dense_diagonal=dataset.settings.mge_diagonal,
+        )
     source_data = data_vector(
         np.zeros((residual.size, 0)),
         system.operator.mapping,
@@ -765,19 +791,29 @@ def _dense_source_problem(dataset, model, dense, fixed, system) -> DenseSourcePr
         dense_diagonal=dataset.settings.mge_diagonal,
         source_block=system.curvature_regularization,
         source_data=source_data,
-        lens_source=lambda indices: system.lens_source(dense.columns(indices), dataset),
+        lens_source=lambda columns: system.lens_source(columns, dataset),
         source_image=system.operator.image,
         log_det_source=system.log_det_curvature_regularization,
     )
 
 
-def _scored(dataset, model, solution, lens_light_image, n_lens, source_columns, operator, system):
-    """The :class:`FitResult` of a solution with the lens-light image it makes (fixed
-    light included) and ``n_lens`` lens-light unknowns: images, χ², ln L and, for a
-    pixelized source, the log evidence and its terms (SPEC §7)."""
+def _scored(
+    dataset,
+    model,
+    solution,
+    lens_light_image,
+    source_light_image,
+    n_lens,
+    n_dense,
+    operator,
+    system,
+):
+    """The :class:`FitResult` of a solution, given the images of its lens light (fixed
+    light included) and of its source Gaussians, and its counts of lens-light and of
+    Gaussian unknowns: images, χ², ln L and, for a pixelized source, the log evidence
+    and its terms (SPEC §7)."""
     x = solution.x
-    n_dense = n_lens + source_columns.shape[1]
-    lensed_source_image = source_columns @ x[n_lens:n_dense]
+    lensed_source_image = source_light_image
     if operator is not None:
         lensed_source_image = lensed_source_image + operator.image(x[n_dense:])
     model_image = lens_light_image + lensed_source_image

@@ -640,13 +640,19 @@ class LightGrid:
             self.convolver.blur_columns(on_grid, include_blurring=True, out=out, at=on_grid_at)
         return out
 
-    def lazy_blurred_columns(self, components: list) -> "LazyBlurredColumns":
-        """The columns of :meth:`blurred_columns`, each blurred only when it is asked
-        for (:class:`LazyBlurredColumns`)."""
+    def lazy_blurred_columns(
+        self, components: list, appended: np.ndarray | None = None
+    ) -> "LazyBlurredColumns":
+        """The columns of :meth:`blurred_columns`, then those of the unblurred ``appended``
+        (N_ext, m) values on the mask ∪ blurring region (a source MGE traced through the
+        mass), each blurred only when it is asked for (:class:`LazyBlurredColumns`)."""
         wide = np.concatenate([self._wide(c) for c in components] or [np.zeros(0, bool)])
         closed_form = np.zeros((self.n_image_pixels, np.count_nonzero(wide)))
         position = np.cumsum(wide) - 1
         on_grid, on_grid_at = self._closed_form_and_on_grid(components, closed_form, position)
+        if appended is not None and appended.shape[1]:
+            on_grid = np.concatenate([on_grid, appended], axis=1)
+            on_grid_at = np.concatenate([on_grid_at, wide.size + np.arange(appended.shape[1])])
         return LazyBlurredColumns(
             self.convolver, closed_form, np.flatnonzero(wide), on_grid, on_grid_at
         )

@@ -27,7 +27,7 @@ evidence term, is the same as the full solve's.
 """
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -39,15 +39,16 @@ from mgelens.inversion.system import weighted_gram
 
 @dataclass(frozen=True, eq=False)
 class DenseSourceProblem:
-    """The linear problem [dense columns L | source pixels] of one fit, in parts.
+    """The linear problem [dense columns L | source pixels] of one fit, in parts; a
+    problem without a pixelized source (SP) leaves the source fields at their defaults.
 
     Attributes
     ----------
     dense : LazyBlurredColumns-like
-        The blurred dense columns L (lens-light Gaussians): ``n_columns``,
+        The blurred dense columns L (lens-light and source Gaussians): ``n_columns``,
         ``columns(indices)`` → (N_I, k) and ``transposed_product(v)`` → Lᵀv (n_dense,)
         (:class:`mgelens.light.LazyBlurredColumns`, which blurs a column only when it is
-        asked for)
+        asked for).
     inverse_variance : ndarray (N_I,)
         w_i = 1/σ_i².
     residual : ndarray (N_I,)
@@ -58,10 +59,9 @@ class DenseSourceProblem:
         F_SS + H, read only.
     source_data : ndarray (n_s,)
         The source part of D, fᵀBᵀ W r.
-    lens_source : callable
-        ``lens_source(columns)`` → F_LS (k, n_s) of the dense columns at the indices
-        ``columns``.
-    source_image : callable
+    lens_source : callable or None
+        ``lens_source(columns)`` → F_LS (k, n_s) of dense columns (N_I, k).
+    source_image : callable or None
         ``source_image(fluxes)`` → B f s (N_I,), the blurred lensed source.
     log_det_source : float or None
         ln det(F_SS + H) if known (a source held fixed across calls); else the solve
@@ -72,10 +72,10 @@ class DenseSourceProblem:
     inverse_variance: np.ndarray
     residual: np.ndarray
     dense_diagonal: float
-    source_block: np.ndarray
-    source_data: np.ndarray
-    lens_source: Callable[[np.ndarray], np.ndarray]
-    source_image: Callable[[np.ndarray], np.ndarray]
+    source_block: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    source_data: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    lens_source: Callable[[np.ndarray], np.ndarray] | None = None
+    source_image: Callable[[np.ndarray], np.ndarray] | None = None
     log_det_source: float | None = None
 
     @property
@@ -85,29 +85,38 @@ class DenseSourceProblem:
 
 class _DenseColumnSupply:
     """The rows and columns of Q of the dense unknowns, filled when the NNLS needs them
-    (the ``supply`` of :func:`~mgelens.inversion.nnls.reconstruction_positive_only`)."""
+    (the ``supply`` of :func:`~mgelens.inversion.nnls.reconstruction_positive_only`).
+    The filled columns are kept side by side (column-major), for the cross terms of
+    later ones and the model image."""
 
     def __init__(self, problem: DenseSourceProblem, unknown: np.ndarray):
         self.problem = problem
         self.unknown = unknown
         self.weighted_residual = problem.inverse_variance * problem.residual
+        self._columns = np.empty((problem.residual.size, problem.n_dense), order="F")
+        self._indices = np.empty(problem.n_dense, dtype=np.int64)
+        self._n_filled = 0
 
     def fill(self, q: np.ndarray, columns: np.ndarray) -> None:
         """Fill Q's rows and columns of the dense ``columns`` against every filled dense
         unknown, each other and the source, and mark them filled."""
-        p = self.problem
-        filled = np.flatnonzero(~self.unknown[: p.n_dense])
-        new = p.dense.columns(columns)
-        cross = (p.inverse_variance[:, None] * new).T @ p.dense.columns(filled)
+        p, k, e = self.problem, self._n_filled, columns.size
+        filled = self._indices[:k]
+        new = self._columns[:, k : k + e]
+        new[:] = p.dense.columns(columns)
+        weighted = p.inverse_variance[:, None] * new
+        cross = weighted.T @ self._columns[:, :k]
         q[np.ix_(columns, filled)] = cross
         q[np.ix_(filled, columns)] = cross.T
         gram = weighted_gram(new, p.inverse_variance)
-        gram[np.arange(columns.size), np.arange(columns.size)] += p.dense_diagonal
+        gram[np.arange(e), np.arange(e)] += p.dense_diagonal
         q[np.ix_(columns, columns)] = gram
-        if columns.size:
-            f_ls = p.lens_source(columns)
+        if e and p.lens_source is not None:
+            f_ls = p.lens_source(new)
             q[columns, p.n_dense :] = f_ls
             q[p.n_dense :, columns] = f_ls.T
+        self._indices[k : k + e] = columns
+        self._n_filled = k + e
         self.unknown[columns] = False
 
     def enter(self, q: np.ndarray, x: np.ndarray, tol: float, k: int) -> np.ndarray:
@@ -117,8 +126,10 @@ class _DenseColumnSupply:
         candidates = np.flatnonzero(self.unknown[: p.n_dense])
         if candidates.size == 0:
             return candidates
-        lit = np.flatnonzero(x[: p.n_dense])
-        model = p.dense.columns(lit) @ x[lit] + p.source_image(x[p.n_dense :])
+        n = self._n_filled
+        model = self._columns[:, :n] @ x[self._indices[:n]]
+        if p.source_image is not None:
+            model += p.source_image(x[p.n_dense :])
         weighted = self.weighted_residual - p.inverse_variance * model
         gradient = p.dense.transposed_product(weighted)[candidates]
         above = np.flatnonzero(gradient > tol)
@@ -169,7 +180,7 @@ def solve_on_working_set(
         [problem.dense.transposed_product(supply.weighted_residual), problem.source_data]
     )
     log_det_source = problem.log_det_source
-    if log_det_source is None:
+    if log_det_source is None and n_source:
         factor = upper_cholesky(problem.source_block.copy())
         log_det_source = float(2.0 * np.sum(np.log(np.diag(factor))))
     result = reconstruction_positive_only(q, d, initial_passive=start, supply=supply)
