@@ -18,9 +18,13 @@ repository root, e.g.::
 
     python benchmarks/bench_phase_draws.py --lens-dir ../shared/data/slacs/slacs1250+0523 \\
         --results results/slacs1250+0523 --mask-radius 3.0 --phase light --mge-sets 6
+
+``--slam`` gives the chain's settings where they differ from the profile's, e.g.
+``--slam '{"source_pixels": [500, 1000]}'`` for a chain that chose its pixel count.
 """
 
 import argparse
+import json
 import time
 from pathlib import Path
 
@@ -28,7 +32,7 @@ import numpy as np
 from common import host_yardstick_ms, set_threads
 
 from mgelens.pipeline.run import PhaseLikelihood, build_problem, reference_passive_set
-from mgelens.pipeline.settings import PHASES, LensSpec, profile_settings
+from mgelens.pipeline.settings import PHASES, LensSpec, load_settings
 from mgelens.rejection import REJECTED_LOG_LIKELIHOOD
 
 
@@ -49,14 +53,19 @@ def main() -> None:
     parser.add_argument("--no-point-set", action="store_true")
     parser.add_argument("--profile", default="quick", choices=("quick", "paper"))
     parser.add_argument("--draws", type=int, default=60, help="timed calls per kind")
+    parser.add_argument(
+        "--slam",
+        type=json.loads,
+        default=None,
+        help="the chain's slam settings as JSON, as `mgelens phase --slam` takes them",
+    )
     args = parser.parse_args()
     set_threads(1)
     lens = LensSpec(
         mask_radius=args.mask_radius, mge_sets=args.mge_sets, point_set=not args.no_point_set
     )
-    problem = build_problem(
-        args.phase, args.lens_dir, args.results, profile_settings(args.profile), lens
-    )
+    settings = load_settings(None, args.profile, args.slam)
+    problem = build_problem(args.phase, args.lens_dir, args.results, settings, lens)
     likelihood = PhaseLikelihood(
         problem.dataset, problem.space, problem.model, None, reference_passive_set(problem)
     )
