@@ -1331,6 +1331,11 @@ def test_true_light_refit_scores_the_fit_against_a_fixed_lens_light(
     assert same.delta_log_evidence == pytest.approx(0.0, abs=1e-6 * abs(own.log_evidence))
     assert same.n_lens_light_intensities == np.count_nonzero(own.lens_light_intensities) > 0
     assert same.lens_light_prior_coefficient is None  # these chains carry no prior
+    warm = true_light_refit(
+        problem.dataset, model, own_light, run.reference_passive_set(problem)
+    )  # the sampler's warm start for the model's own fit: the same minimum
+    assert warm.log_evidence == pytest.approx(own.log_evidence, rel=1e-10)
+    assert warm.true_light_log_evidence == same.true_light_log_evidence
     dimmer = true_light_refit(problem.dataset, model, 0.8 * own_light)
     none = true_light_refit(problem.dataset, model, 0.0 * own_light)
     assert none.delta_log_evidence < dimmer.delta_log_evidence < 0.0

@@ -282,7 +282,10 @@ class TrueLightRefit:
 
 
 def true_light_refit(
-    dataset: FitDataset, model: LensModel, true_light: np.ndarray
+    dataset: FitDataset,
+    model: LensModel,
+    true_light: np.ndarray,
+    passive_start: np.ndarray | None = None,
 ) -> TrueLightRefit:
     """Score ``model`` on ``dataset`` with its own lens light and with ``true_light``.
 
@@ -298,13 +301,18 @@ def true_light_refit(
         Native image of the true PSF-convolved lens light (shape of ``dataset.imaging``,
         units of the data). It is subtracted from the data and the source alone is solved,
         which equals fitting the data with the lens light fixed to the truth.
+    passive_start : ndarray, optional
+        Warm start of ``model``'s own fit (:func:`mgelens.fit.fit`), the one its phase's
+        sampler used (:func:`mgelens.pipeline.run.reference_passive_set`): the same
+        minimum, without the default start's factorisation of the whole system, which
+        fails on some ill-conditioned lens-light blocks.
     """
     if model.source is None:
         raise ValueError("the true-light refit needs a model with a source")
     imaging = dataset.imaging
     if true_light.shape != imaging.shape:
         raise ValueError(f"true lens light has shape {true_light.shape}, data {imaging.shape}")
-    own = fit(dataset, model)
+    own = fit(dataset, model, passive_start)
     without_light = FitDataset.from_imaging(
         dataclasses.replace(imaging, data=imaging.data - true_light),
         dataset.mask,

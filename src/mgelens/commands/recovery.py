@@ -50,7 +50,7 @@ from mgelens.isophote_recovery import (
 from mgelens.isophotes import TABLE_COLUMNS, isophote_table
 from mgelens.mask import circular
 from mgelens.pipeline.records import MODEL_FILE, recorded_lens
-from mgelens.pipeline.run import max_likelihood_problem
+from mgelens.pipeline.run import max_likelihood_problem, reference_passive_set
 from mgelens.plot import save_png
 from mgelens.plot.isophote_recovery import isophote_recovery_figure
 from mgelens.recovery import (
@@ -132,7 +132,12 @@ def run(args: argparse.Namespace) -> int:
             split_annulus_edges(radius),
         )  # fmt: skip
         problem, values = max_likelihood_problem(phase, args.lens_dir, args.phase.parent)
-        refit = true_light_refit(problem.dataset, problem.model.build(values), true_light)
+        refit = true_light_refit(
+            problem.dataset,
+            problem.model.build(values),
+            true_light,
+            reference_passive_set(problem),
+        )
         isophotes = None
         if args.isophotes is not None:
             isophotes = _isophote_recovery(args, lens, truth, true_light, pixel_scale)
