@@ -67,14 +67,12 @@ NOMINAL_SMOOTHNESS = 100.0
 
 STAGES = {
     # stage: [(file, function, caller as (file, function), or None for any caller)]
-    # LIGHT's working set blurs the lens-light columns it fills inside the curvature
-    # (the warm start's) and NNLS (the entering ones) stages
     "lens_light_columns": [
         ("light.py", "columns", ("light.py", "<listcomp>")),
-        ("light.py", "columns", ("light.py", "_closed_form_and_on_grid")),
+        ("light.py", "columns", ("light.py", "blurred_columns")),
     ],
     "lens_light_closed_form": [
-        ("light.py", "blurred_gaussian_columns", ("light.py", "_closed_form_and_on_grid"))
+        ("light.py", "blurred_gaussian_columns", ("light.py", "blurred_columns"))
     ],
     "lens_light_blur": [("convolve.py", "blur_columns", ("light.py", "blurred_columns"))],
     "source_mge_columns": [("light.py", "columns", ("fit.py", "<listcomp>"))],
@@ -102,14 +100,8 @@ STAGES = {
         ("system.py", "curvature_matrix", None),
         ("fit.py", "curvature", None),
         ("fit.py", "lens_light_dense_terms", None),
-        ("working_set.py", "fill", ("working_set.py", "solve_on_working_set")),
     ],
-    # with the working set (LIGHT), the NNLS includes the gradients of the columns off
-    # it and the rows of those that enter
-    "nnls_and_log_dets": [
-        ("solve.py", "solve_linear_system", None),
-        ("nnls.py", "reconstruction_positive_only", ("working_set.py", "solve_on_working_set")),
-    ],
+    "nnls_and_log_dets": [("solve.py", "solve_linear_system", None)],
 }
 
 

@@ -99,24 +99,6 @@ def test_transpose_blur_is_the_transpose_of_the_mask_operator(asymmetric_psf):
     assert not np.allclose(conv.blur_columns(columns, include_blurring=False), expected)
 
 
-@pytest.mark.parametrize("method", ["direct", "fft"])
-def test_transpose_to_the_extended_region_is_the_transpose_of_the_light_operator(
-    asymmetric_psf, method, monkeypatch
-):
-    """B_extᵀ v (mask to mask ∪ blurring region) equals the transpose of the operator
-    that blurs light columns into the mask, by either route of the flipped blur."""
-    x, y = pixel_centres((31, 29), 0.1)
-    mask = np.hypot(x - 0.2, y) > 1.1
-    conv = Convolver(mask, asymmetric_psf)
-    monkeypatch.setattr(Convolver, "_method_for", lambda self, blurring, chosen: method)
-    vector = np.random.default_rng(4).random(np.count_nonzero(~mask))
-    expected = conv.operator(include_blurring=True).T @ vector
-    result = conv.transpose_blur_to_extended(vector)
-    assert result.shape == (np.count_nonzero(~conv.extended_mask),)
-    assert np.allclose(result, expected, atol=1e-13)
-    assert np.count_nonzero(expected[conv._mask_in_extended == 0]) > 0  # the ring is reached
-
-
 @pytest.mark.parametrize("threads", [1, 2])
 def test_fft_blurring_runs_large_batches_on_the_jobs_threads(asymmetric_psf, monkeypatch, threads):
     """scipy.fft gets numba's thread count as its workers for a batch of at least

@@ -141,6 +141,12 @@ def test_repeated_mass_and_source_reuse_the_source_system(sparse_pass, monkeypat
         fresh = fit(make_dataset(data), model)
         assert reused.log_evidence == pytest.approx(fresh.log_evidence, rel=1e-10)
         np.testing.assert_allclose(reused.solution.x, fresh.solution.x, rtol=1e-6, atol=1e-9)
+        # warm-started (the sampler's calls): ln det(F_SS + H) comes from the system
+        warm = fit(dataset, model, fresh.passive_set)
+        assert warm.log_det_curvature_regularization == pytest.approx(
+            fresh.log_det_curvature_regularization, rel=1e-12
+        )
+        assert warm.log_evidence == pytest.approx(fresh.log_evidence, rel=1e-10)
     system = dataset._source_cache["system"]
     assert (system.weighted_blurred is not None) == sparse_pass
     # another mass model (equal by value is enough) or source object starts afresh

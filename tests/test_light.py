@@ -162,35 +162,6 @@ def test_light_grid_blurred_columns_equal_native_convolution():
     assert np.allclose(image, matrix[:, :6] @ np.arange(1.0, 7.0), rtol=1e-10)
 
 
-@pytest.mark.parametrize("analytic_sigma", [np.inf, 0.1])
-def test_lazy_columns_equal_the_blurred_columns_and_their_transposed_products(analytic_sigma):
-    """The columns blurred on request (LIGHT's working set) are
-    :meth:`LightGrid.blurred_columns`' to the last bit, in any order and repeated; Lᵀv
-    through the unblurred columns and B_extᵀ v matches the blurred columns' to rounding,
-    before and after some columns are blurred; with a closed-form σ both routes mix."""
-    x, y = pixel_centres((41, 41), 0.05)
-    mask = np.hypot(x, y) > 0.8
-    rng = np.random.default_rng(2)
-    psf = rng.random((7, 5))
-    psf /= psf.sum()
-    light_grid = LightGrid.from_mask(mask, psf, 0.05, analytic_sigma=analytic_sigma)
-    sets = [
-        MGESet.extended((0.01, 0.0), ell_comps_from(0.7, 10.0), 0.05, 0.8, n_gaussians=12),
-        MGESet.point((0.0, 0.02), (0.0, 0.0), 0.05),
-    ]
-    matrix = light_grid.blurred_columns(sets)
-    lazy = light_grid.lazy_blurred_columns(sets)
-    assert lazy.n_columns == matrix.shape[1] == 22
-    vector = rng.normal(size=matrix.shape[0])
-    expected = matrix.T @ vector
-    for indices in ([], [21, 3, 3, 0], [11, 5], list(range(22))):
-        product = lazy.transposed_product(vector)
-        assert np.allclose(product, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
-        np.testing.assert_array_equal(
-            lazy.columns(np.array(indices, dtype=int)), matrix[:, indices]
-        )
-
-
 def test_bad_light_parameters_raise():
     with pytest.raises(ValueError, match="increasing"):
         MGESet((0, 0), (0, 0), np.array([0.2, 0.1]))

@@ -477,11 +477,6 @@ class Convolver:
         one multiply-add each for the direct and separable routes)."""
         return min(self._costs[include_blurring].values())
 
-    def route(self, include_blurring: bool) -> str:
-        """The method ``auto`` blurs columns of this input region by: "direct", "fft" or
-        "separable"."""
-        return self._method_for(include_blurring, "auto")
-
     def _method_for(self, include_blurring: bool, method: str) -> str:
         if method != "auto":
             return method
@@ -557,24 +552,6 @@ class Convolver:
         ``columns`` (N_I,) or (N_I, n_col) are on the unmasked pixels; so is the result.
         """
         return self._flipped.blur_columns(columns, include_blurring=False)
-
-    def transpose_blur_to_extended(self, vector: np.ndarray) -> np.ndarray:
-        """B_extᵀ v for the operator B_ext of ``include_blurring=True`` (mask ∪ blurring
-        region to mask): ``vector`` (N_I,) on the unmasked pixels, the result (N_ext,) on
-        the mask ∪ blurring region, slim order. The flipped PSF blurs v (zero outside the
-        mask) within the extended region."""
-        padded = np.zeros(self._mask_in_extended.size)
-        padded[self._mask_in_extended] = vector
-        return self._flipped_extended.blur_columns(padded, include_blurring=False)
-
-    @cached_property
-    def _mask_in_extended(self) -> np.ndarray:
-        """Per pixel of the extended region (slim order): whether it is unmasked."""
-        return ~self.mask[~self.extended_mask]
-
-    @cached_property
-    def _flipped_extended(self) -> "Convolver":
-        return Convolver(self.extended_mask, self.psf[::-1, ::-1].copy())
 
     @cached_property
     def _flipped(self) -> "Convolver":

@@ -40,7 +40,6 @@ from mgelens.inversion.system import (
     data_vector,
     weighted_gram,
 )
-from mgelens.inversion.working_set import DenseSourceProblem, solve_on_working_set
 from mgelens.light import LightGrid, MGESet
 from mgelens.light_prior import MGESmoothnessPrior, PriorTerms
 from mgelens.mask import validate_mask
@@ -513,15 +512,6 @@ class SourceSystem:
             operator, f_ss, log_det_cholesky(f_ss), log_det_regularization(h), weighted_blurred
         )
 
-    def lens_source(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
-        """F_LS (n_dense, n_source) of a few dense columns L of ``dataset`` (those the
-        working set fills, :mod:`mgelens.inversion.working_set`): (fᵀ Bᵀ W L)ᵀ, a
-        transposed blur per column, then a sparse product. For a few columns this beats
-        :meth:`curvature`'s sparse pass over W B f, whose cost is mostly fixed
-        (docs/benchmarks.md, "The non-negative solve over a working set")."""
-        terms = DenseTerms.build(dense, dataset.inverse_variance, dataset.convolver)
-        return terms.lens_source(self.operator.mapping)
-
     def curvature(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
         """The full [dense | source] matrix F + H for new ``dense`` columns L of
         ``dataset``. F_LS = Lᵀ (W B f) in one sparse pass where that is cheaper (large
@@ -576,17 +566,11 @@ def pixelized_operator(dataset: FitDataset, mass, source: PixelizedSource) -> So
 
 def source_light_columns(dataset: FitDataset, mass, sets: tuple[MGESet, ...]) -> np.ndarray:
     """PSF-convolved unit columns (N_I, Σ N_g) of source-plane MGE sets seen through ``mass``."""
-    columns = _unblurred_source_light_columns(dataset, mass, sets)
-    return dataset.convolver.blur_columns(columns, include_blurring=True)
-
-
-def _unblurred_source_light_columns(dataset: FitDataset, mass, sets) -> np.ndarray:
-    """The columns of :func:`source_light_columns` before the PSF, binned on the mask ∪
-    blurring region (N_ext, Σ N_g)."""
     grid = dataset.light_grid.grid
     bx, by = mass_module.ray_trace(mass, grid.x, grid.y)
     traced = replace(grid, x=bx, y=by)
-    return np.concatenate([s.columns(traced) for s in sets], axis=1)
+    columns = np.concatenate([s.columns(traced) for s in sets], axis=1)
+    return dataset.convolver.blur_columns(columns, include_blurring=True)
 
 
 def fit(
@@ -604,6 +588,8 @@ def fit(
     Raises one of :data:`FitError` when the sample cannot be fitted (degenerate mesh,
     non-positive-definite system, NNLS iteration cap).
     """
+    fixed, lens_columns, source_columns = _dense_light(dataset, model)
+    dense = np.hstack([lens_columns, source_columns])
     operator = system = None
     if isinstance(model.source, PixelizedSource):
         system = dataset.repeated_source(model.mass, model.source)
@@ -612,57 +598,35 @@ def fit(
             if system is None
             else system.operator
         )
-    n_lens = sum(c.n_columns for c in model.lens_light)
-    n_dense = n_lens + (
-        sum(s.n_columns for s in model.source.sets) if isinstance(model.source, MGESource) else 0
-    )
-    if n_dense == 0 and operator is None:
+    if dense.shape[1] == 0 and operator is None:
         raise ValueError("the model has no linear light: give it lens light or a source")
-    if passive_start is not None and operator is not None and operator.support is not None:
-        passive_start = np.concatenate(
-            [passive_start[:n_dense], passive_start[n_dense:][operator.support]]
-        )
-    settings = dataset.settings
-    constrained_source = settings.positive_only and not settings.free_source
-    edge_zero = (
-        operator.edge_pixels
-        if operator is not None and constrained_source and settings.force_edge_pixels_to_zero
-        else None
-    )
-    if (
-        passive_start is not None
-        and constrained_source
-        and model.lens_light_prior is None
-        and (operator is None or system is not None)
-        and dataset.convolver.route(include_blurring=True) != "separable"
-    ):
-        return _fit_on_working_set(dataset, model, system, n_dense, passive_start, edge_zero)
-    fixed, lens_columns, source_columns = _dense_light(dataset, model)
-    dense = np.hstack([lens_columns, source_columns])
     q, d = _normal_equations(dataset, model, dense, fixed, operator, system)
     prior = None
     if model.lens_light_prior is not None:
         prior = model.lens_light_prior.system(model.lens_light, dataset.median_inverse_variance)
         log_det_prior_block = prior.add_to(q)
+    if passive_start is not None and operator is not None and operator.support is not None:
+        n_dense = dense.shape[1]
+        passive_start = np.concatenate(
+            [passive_start[:n_dense], passive_start[n_dense:][operator.support]]
+        )
+    settings = dataset.settings
+    fixed_zero = None
+    constrained_source = settings.positive_only and not settings.free_source
+    if operator is not None and constrained_source and settings.force_edge_pixels_to_zero:
+        fixed_zero = np.concatenate([np.zeros(dense.shape[1], dtype=bool), operator.edge_pixels])
     solution = solve_linear_system(
         q,
         d,
         positive_only=settings.positive_only,
-        fixed_zero=None if edge_zero is None else np.r_[np.zeros(n_dense, bool), edge_zero],
-        source_block=slice(n_dense, None) if operator is not None else None,
+        fixed_zero=fixed_zero,
+        source_block=slice(dense.shape[1], None) if operator is not None else None,
         passive_start=passive_start,
-        unconstrained=slice(n_lens, None) if settings.free_source else None,
+        unconstrained=slice(lens_columns.shape[1], None) if settings.free_source else None,
+        source_log_det=None if system is None else system.log_det_curvature_regularization,
     )
     result = _scored(
-        dataset,
-        model,
-        solution,
-        lens_columns @ solution.x[:n_lens] + fixed,
-        source_columns @ solution.x[n_lens:n_dense],
-        n_lens,
-        n_dense,
-        operator,
-        system,
+        dataset, model, solution, fixed, lens_columns, source_columns, operator, system
     )
     if prior is None:
         return result
@@ -674,50 +638,14 @@ def fit(
     )
 
 
-def _fit_on_working_set(dataset, model, system, n_dense, passive_start, edge_zero) -> FitResult:
-    """:func:`fit`, warm-started, of a model with no pixelized source (SP) or whose mass
-    and source repeat from the previous fit (LIGHT): the non-negative solve fills Q's
-    rows of the Gaussians (lens light and source MGE), and blurs their columns, only for
-    those it brings in (:mod:`mgelens.inversion.working_set`); the same minimum as the
-    full solve. Taken unless the PSF blurs by its separable terms (a Gaussian PSF), whose
-    batches of columns cost little more than one column (docs/benchmarks.md, "The
-    non-negative solve over a working set")."""
-    fixed = _fixed_light(dataset, model)
-    source_on_grid = (
-        _unblurred_source_light_columns(dataset, model.mass, model.source.sets)
-        if isinstance(model.source, MGESource)
-        else None
-    )
-    columns = dataset.light_grid.lazy_blurred_columns(list(model.lens_light), source_on_grid)
-    problem = _dense_source_problem(dataset, model, columns, fixed, system)
-    solution = solve_on_working_set(problem, passive_start, edge_zero)
-    n_lens = n_dense - (0 if source_on_grid is None else source_on_grid.shape[1])
-    x = solution.x
-    lens, source = np.flatnonzero(x[:n_lens]), n_lens + np.flatnonzero(x[n_lens:n_dense])
-    return _scored(
-        dataset,
-        model,
-        solution,
-        columns.columns(lens) @ x[lens] + fixed,
-        columns.columns(source) @ x[source],
-        n_lens,
-        n_dense,
-        None if system is None else system.operator,
-        system,
-    )
-
-
-def _fixed_light(dataset: FitDataset, model: LensModel) -> np.ndarray:
-    """The fixed (non-linear) light's blurred image (N_I,), zero without any."""
-    if not model.fixed_light:
-        return np.zeros(dataset.data.size)
-    return dataset.light_grid.blurred_image(list(model.fixed_light))
-
-
 def _dense_light(dataset: FitDataset, model: LensModel) -> tuple[np.ndarray, ...]:
     """The fixed light's blurred image, and the blurred columns of the lens-light
     Gaussians and of the source Gaussians (empty when the model has none)."""
-    fixed = _fixed_light(dataset, model)
+    fixed = (
+        dataset.light_grid.blurred_image(list(model.fixed_light))
+        if model.fixed_light
+        else np.zeros(dataset.data.size)
+    )
     lens_columns = (
         dataset.lens_light_columns(tuple(model.lens_light))
         if model.lens_light
@@ -762,58 +690,14 @@ def _normal_equations(dataset, model, dense, fixed, operator, system):
     return q, d
 
 
-def _dense_source_problem(dataset, model, dense, fixed, system) -> DenseSourceProblem:
-    """The [Gaussians | source pixels] problem of a fit with no pixelized source
-    (``system`` None) or whose mass and source repeat (LIGHT), in the parts
-    :func:`~mgelens.inversion.working_set.solve_on_working_set` fills Q from:
-    ``system``'s F_SS + H and its ln det, and F_LS per column of ``dense``
-    (:class:`mgelens.light.LazyBlurredColumns`)."""
-    residual = dataset.data - fixed
-    if system is None:
-        return DenseSourceProblem(
-            dense=dense,
-            inverse_variance=dataset.inverse_variance,
-            residual=residual,
-            dense_diagonal=dataset.settings.mge_diagonal,
-        )
-    source_data = data_vector(
-        np.zeros((residual.size, 0)),
-        system.operator.mapping,
-        dataset.source_psf_operator,
-        dataset.inverse_variance,
-        residual,
-        None if model.fixed_light else dataset.blurred_weighted_data,
-    )
-    return DenseSourceProblem(
-        dense=dense,
-        inverse_variance=dataset.inverse_variance,
-        residual=residual,
-        dense_diagonal=dataset.settings.mge_diagonal,
-        source_block=system.curvature_regularization,
-        source_data=source_data,
-        lens_source=lambda columns: system.lens_source(columns, dataset),
-        source_image=system.operator.image,
-        log_det_source=system.log_det_curvature_regularization,
-    )
-
-
-def _scored(
-    dataset,
-    model,
-    solution,
-    lens_light_image,
-    source_light_image,
-    n_lens,
-    n_dense,
-    operator,
-    system,
-):
-    """The :class:`FitResult` of a solution, given the images of its lens light (fixed
-    light included) and of its source Gaussians, and its counts of lens-light and of
-    Gaussian unknowns: images, χ², ln L and, for a pixelized source, the log evidence
-    and its terms (SPEC §7)."""
+def _scored(dataset, model, solution, fixed, lens_columns, source_columns, operator, system):
+    """The :class:`FitResult` of a solution: images, χ², ln L and, for a pixelized
+    source, the log evidence and its terms (SPEC §7)."""
     x = solution.x
-    lensed_source_image = source_light_image
+    n_lens = lens_columns.shape[1]
+    n_dense = n_lens + source_columns.shape[1]
+    lens_light_image = lens_columns @ x[:n_lens] + fixed
+    lensed_source_image = source_columns @ x[n_lens:n_dense]
     if operator is not None:
         lensed_source_image = lensed_source_image + operator.image(x[n_dense:])
     model_image = lens_light_image + lensed_source_image

@@ -520,65 +520,6 @@ def light_from_dict(entry: dict) -> list:
     return mge.gaussians(np.asarray(entry["intensities"], dtype=float))
 
 
-class LazyBlurredColumns:
-    """PSF-convolved columns of linear light components (as
-    :meth:`LightGrid.blurred_columns`), each on-grid column blurred the first time it is
-    asked for: a non-negative solve keeps a few of an MGE's columns
-    (:mod:`mgelens.inversion.working_set`), and needs the others only through Lᵀv.
-
-    Attributes
-    ----------
-    n_columns : int
-    """
-
-    def __init__(
-        self,
-        convolver: Convolver,
-        closed_form: np.ndarray,
-        closed_form_at: np.ndarray,
-        on_grid: np.ndarray,
-        on_grid_at: np.ndarray,
-    ):
-        self._convolver = convolver
-        self._closed_form = closed_form
-        self._on_grid = on_grid
-        self._on_grid_at = on_grid_at
-        self.n_columns = closed_form_at.size + on_grid_at.size
-        self._blurred = np.zeros((closed_form.shape[0], on_grid_at.size))
-        self._done = np.zeros(on_grid_at.size, dtype=bool)
-        self._slot = np.empty(self.n_columns, dtype=np.int64)
-        self._slot[closed_form_at] = np.arange(closed_form_at.size)
-        self._slot[on_grid_at] = np.arange(on_grid_at.size)
-        self._is_on_grid = np.zeros(self.n_columns, dtype=bool)
-        self._is_on_grid[on_grid_at] = True
-
-    def columns(self, indices: np.ndarray) -> np.ndarray:
-        """The blurred columns at ``indices`` (N_I, k)."""
-        indices = np.asarray(indices, dtype=np.int64)
-        slots = self._slot[indices]
-        on_grid = self._is_on_grid[indices]
-        todo = np.unique(slots[on_grid][~self._done[slots[on_grid]]])
-        if todo.size:
-            self._convolver.blur_columns(
-                self._on_grid[:, todo], include_blurring=True, out=self._blurred, at=todo
-            )
-            self._done[todo] = True
-        out = np.empty((self._closed_form.shape[0], indices.size))
-        out[:, ~on_grid] = self._closed_form[:, slots[~on_grid]]
-        out[:, on_grid] = self._blurred[:, slots[on_grid]]
-        return out
-
-    def transposed_product(self, vector: np.ndarray) -> np.ndarray:
-        """Lᵀ v (n_columns,) of every column L_j and a vector ``v`` (N_I,) on the mask:
-        the closed-form columns directly, the on-grid ones as (unblurred column)ᵀ(B_extᵀ v)."""
-        result = np.empty(self.n_columns)
-        result[~self._is_on_grid] = self._closed_form.T @ vector
-        if self._on_grid_at.size:
-            spread = self._convolver.transpose_blur_to_extended(vector)
-            result[self._on_grid_at] = self._on_grid.T @ spread
-        return result
-
-
 @dataclass(frozen=True)
 class LightGrid:
     """Over-sampled evaluation grid + PSF for lens-light images inside a mask.
@@ -633,36 +574,7 @@ class LightGrid:
     def blurred_columns(self, components: list) -> np.ndarray:
         """PSF-convolved unit-intensity columns of linear light components (MGE sets,
         Sérsics), (N_I, Σ n_columns), component by component."""
-        n_columns = sum(c.n_columns for c in components)
-        out = np.zeros((self.n_image_pixels, n_columns))
-        on_grid, on_grid_at = self._closed_form_and_on_grid(components, out, np.arange(n_columns))
-        if on_grid_at.size:
-            self.convolver.blur_columns(on_grid, include_blurring=True, out=out, at=on_grid_at)
-        return out
-
-    def lazy_blurred_columns(
-        self, components: list, appended: np.ndarray | None = None
-    ) -> "LazyBlurredColumns":
-        """The columns of :meth:`blurred_columns`, then those of the unblurred ``appended``
-        (N_ext, m) values on the mask ∪ blurring region (a source MGE traced through the
-        mass), each blurred only when it is asked for (:class:`LazyBlurredColumns`)."""
-        wide = np.concatenate([self._wide(c) for c in components] or [np.zeros(0, bool)])
-        closed_form = np.zeros((self.n_image_pixels, np.count_nonzero(wide)))
-        position = np.cumsum(wide) - 1
-        on_grid, on_grid_at = self._closed_form_and_on_grid(components, closed_form, position)
-        if appended is not None and appended.shape[1]:
-            on_grid = np.concatenate([on_grid, appended], axis=1)
-            on_grid_at = np.concatenate([on_grid_at, wide.size + np.arange(appended.shape[1])])
-        return LazyBlurredColumns(
-            self.convolver, closed_form, np.flatnonzero(wide), on_grid, on_grid_at
-        )
-
-    def _closed_form_and_on_grid(
-        self, components: list, out: np.ndarray, position: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Write the closed-form columns into ``out[:, position[j]]`` (j the column's
-        index over all components) and return the other columns' binned, unblurred values
-        on the mask ∪ blurring region (N_ext, m) and their indices j (m,)."""
+        out = np.zeros((self.n_image_pixels, sum(c.n_columns for c in components)))
         on_grid, on_grid_at = [], []
         start = 0
         for component in components:
@@ -677,7 +589,7 @@ class LightGrid:
                     component.sigmas[wide],
                     self.cumulants,
                     out=out,
-                    at=position[at[wide]],
+                    at=at[wide],
                 )
             if not wide.all():
                 narrow = component
@@ -685,10 +597,14 @@ class LightGrid:
                     narrow = replace(component, sigmas=component.sigmas[~wide])
                 on_grid.append(narrow.columns(self.grid))
                 on_grid_at.append(at[~wide])
-        if not on_grid:
-            n_extended = int(np.count_nonzero(~self.convolver.extended_mask))
-            return np.zeros((n_extended, 0)), np.zeros(0, dtype=np.int64)
-        return np.concatenate(on_grid, axis=1), np.concatenate(on_grid_at)
+        if on_grid:
+            self.convolver.blur_columns(
+                np.concatenate(on_grid, axis=1),
+                include_blurring=True,
+                out=out,
+                at=np.concatenate(on_grid_at),
+            )
+        return out
 
     def _wide(self, component) -> np.ndarray:
         """Per column of ``component``: whether it takes the closed-form route."""

@@ -4,8 +4,6 @@
   with some unknowns forced to zero.
 * :mod:`mgelens.inversion.nnls` — the fast non-negative least squares of Bro & De Jong on
   the normal equations ("nn-MGE").
-* :mod:`mgelens.inversion.working_set` — the non-negative solve with the Gaussians' rows of
-  the system filled only for those it brings in (LIGHT and SP on full-rank PSFs).
 * :mod:`mgelens.inversion.cholesky` — the checked Cholesky factorisations and solves both use.
 * :mod:`mgelens.inversion.evidence` — log determinants and the log evidence.
 

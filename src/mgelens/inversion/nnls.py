@@ -111,7 +111,6 @@ def reconstruction_positive_only(
     use_initial_passive: bool = True,
     max_iterations: int = MAX_ITERATIONS,
     unconstrained: np.ndarray | None = None,
-    supply=None,
 ) -> NNLSResult:
     """Minimise Φ(x) = xᵀQx − 2Dᵀx subject to x ≥ 0 (fast NNLS, SPEC §6.3).
 
@@ -134,14 +133,6 @@ def reconstruction_positive_only(
         Cap on the outer and on the cumulative inner iterations.
     unconstrained : numpy.ndarray, optional
         Q⁻¹D if the caller has it already (the default start then needs no Cholesky of Q).
-    supply : optional
-        For a Q whose rows and columns are filled only where they are needed
-        (:mod:`mgelens.inversion.working_set`): an object with ``unknown``, the (n,) bool
-        mask of the unknowns whose rows and columns of Q are not filled (zero), and
-        ``enter(Q, x, tol, k)``, which returns up to ``k`` of them whose gradient
-        D_j − (Qx)_j exceeds ``tol``, largest first, after filling their rows and
-        columns of ``Q`` and clearing their ``unknown`` flags. The unfilled unknowns must
-        be off ``initial_passive``; they are looked at only when no filled one may enter.
 
     Returns
     -------
@@ -171,7 +162,7 @@ def reconstruction_positive_only(
     factor = _PassiveCholesky(Q, D)
     factor.reset(order)
     x, n_inner = _feasible_start(factor, passive, tol, max_iterations)
-    x, n_outer = _outer_iterations(Q, D, factor, passive, x, tol, max_iterations, n_inner, supply)
+    x, n_outer = _outer_iterations(Q, D, factor, passive, x, tol, max_iterations, n_inner)
     if not np.all(np.isfinite(x)):
         raise InversionError("NNLS gave a non-finite solution")
     return NNLSResult(x=x, passive=passive, n_iterations=n_outer)
@@ -219,15 +210,14 @@ def _outer_iterations(
     tol: float,
     max_iterations: int,
     n_inner: int,
-    supply=None,
 ) -> tuple[np.ndarray, int]:
     """The outer loop from the feasible ``x``: the solution and the number of outer
     iterations. ``passive`` and the factor are updated in place; ``n_inner`` inner
-    iterations were already taken; ``supply`` as in :func:`reconstruction_positive_only`."""
+    iterations were already taken."""
     n_outer = stagnant = 0
     gradient = np.empty(D.size)
     block = ENTERING_BLOCK
-    entering = _entering(Q, D, x, passive, tol, block, gradient, supply)
+    entering = _largest_gradients_off_passive(Q, D, x, passive, tol, block, gradient)
     while entering.size:
         n_outer = _counted(n_outer, max_iterations, "outer")
         previous = passive.copy()
@@ -239,17 +229,8 @@ def _outer_iterations(
         if stagnant >= STAGNATION_LIMIT:
             break
         block = 1 if unchanged else ENTERING_BLOCK
-        entering = _entering(Q, D, x, passive, tol, block, gradient, supply)
+        entering = _largest_gradients_off_passive(Q, D, x, passive, tol, block, gradient)
     return x, n_outer
-
-
-def _entering(Q, D, x, passive, tol, k, gradient, supply) -> np.ndarray:
-    """Up to ``k`` unknowns to enter the passive set: the filled ones of largest gradient
-    above ``tol``, or if there is none, the ``supply``'s."""
-    if supply is None:
-        return _largest_gradients_off_passive(Q, D, x, passive, tol, k, gradient)
-    entering = _largest_gradients_off_passive(Q, D, x, passive | supply.unknown, tol, k, gradient)
-    return entering if entering.size else supply.enter(Q, x, tol, k)
 
 
 def _restricted_minimum(

@@ -103,6 +103,7 @@ def solve_linear_system(
     source_block: slice | None = None,
     passive_start: np.ndarray | None = None,
     unconstrained: slice | None = None,
+    source_log_det: float | None = None,
 ) -> LinearSolution:
     """Solve the inversion's normal equations, optionally non-negative (SPEC §6.2–6.3).
 
@@ -140,6 +141,10 @@ def solve_linear_system(
         ≥ 0 (the 3×Sérsic runs' lens light non-negative and source free, SPEC §8.1;
         :func:`_solve_partly_constrained`). ``fixed_zero`` does not apply then, and a
         ``source_block`` must lie inside it.
+    source_log_det : float, optional
+        ln det of the source block if the caller has it (a source held fixed across
+        calls, :class:`mgelens.fit.SourceSystem`): the warm-started non-negative solve
+        then factorises no source block of its own. Other solves ignore it.
 
     Returns
     -------
@@ -174,7 +179,7 @@ def solve_linear_system(
             raise ValueError(f"passive_start must have shape ({n},), got {start.shape}")
         start = start[free]
     if source_block is not None:
-        return _solve_source_first(Q, D, positive_only, free, source_block, start)
+        return _solve_source_first(Q, D, positive_only, free, source_block, start, source_log_det)
     if not positive_only:
         x = reconstruction_positive_negative(Q, D)
         return LinearSolution(x, False, np.zeros(n, dtype=bool), 0)
@@ -196,6 +201,7 @@ def _solve_source_first(
     free: np.ndarray,
     source_block: slice,
     start: np.ndarray | None,
+    source_log_det: float | None = None,
 ) -> LinearSolution:
     """:func:`solve_linear_system` with one Cholesky of Q ordered (A, E, M).
 
@@ -222,7 +228,9 @@ def _solve_source_first(
     n_a, n_s = a.size, a.size + e.size
     reduced_q, reduced_d = (Q, D) if free.all() else (Q[np.ix_(free, free)], D[free])
     if positive_only and start is not None:
-        return _solve_without_factor_of_q(Q, reduced_q, reduced_d, free, source_block, start)
+        return _solve_without_factor_of_q(
+            Q, reduced_q, reduced_d, free, source_block, start, source_log_det
+        )
     order = np.concatenate([a, e, m])
     try:
         U = upper_cholesky(Q[np.ix_(order, order)])
@@ -256,15 +264,19 @@ def _solve_without_factor_of_q(
     free: np.ndarray,
     source_block: slice,
     start: np.ndarray | None,
+    source_log_det: float | None = None,
 ) -> LinearSolution:
     """The positive-only solve of :func:`_solve_source_first` without a factor of Q: the
     NNLS from the passive set ``start`` (None: the empty set), which factorises only the
-    blocks it frees, and ln det of the source block alone (F_SS + H). Taken with a warm
+    blocks it frees, and ln det of the source block alone (F_SS + H; ``source_log_det``
+    if given). Taken with a warm
     start, and when Q as a whole does not factorise (numerically singular outside the
     source block: lens-light columns that are nearly copies of each other, or whose scales
     differ by ~10¹⁹); the same minimum, without the unconstrained start."""
-    U = upper_cholesky(Q[source_block, source_block].copy())
-    log_det_source = float(2.0 * np.sum(np.log(np.diag(U))))
+    log_det_source = source_log_det
+    if log_det_source is None:
+        U = upper_cholesky(Q[source_block, source_block].copy())
+        log_det_source = float(2.0 * np.sum(np.log(np.diag(U))))
     if start is None:
         result = reconstruction_positive_only(reduced_q, reduced_d, use_initial_passive=False)
     else:
