@@ -269,10 +269,10 @@ def _solve_without_factor_of_q(
     """The positive-only solve of :func:`_solve_source_first` without a factor of Q: the
     NNLS from the passive set ``start`` (None: the empty set), which factorises only the
     blocks it frees, and ln det of the source block alone (F_SS + H; ``source_log_det``
-    if given). Taken with a warm
-    start, and when Q as a whole does not factorise (numerically singular outside the
-    source block: lens-light columns that are nearly copies of each other, or whose scales
-    differ by ~10¹⁹); the same minimum, without the unconstrained start."""
+    if given). Taken with a warm start, and when Q as a whole does not factorise
+    (numerically singular outside the source block: lens-light columns that are nearly
+    copies of each other, or whose scales differ by ~10¹⁹); the same minimum, without
+    the unconstrained start."""
     log_det_source = source_log_det
     if log_det_source is None:
         U = upper_cholesky(Q[source_block, source_block].copy())
