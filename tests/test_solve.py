@@ -179,6 +179,39 @@ def test_explicit_initial_passive_set():
     assert_same_minimum(Q, D, everything.x, reference)
 
 
+def test_stable_unknowns_leave_the_warm_start_only_after_the_others():
+    """From the passive set {0, 1, 2} the restricted solution is (0.90, −0.32, −0.69).
+    Unknowns 0 and 1 are stable: 2 leaves first, which makes z = (0.499, 0.195) positive,
+    the minimum (2's gradient −1.21). Dropping both non-positive ones at once needs one
+    outer iteration to bring 1 back. Both reach scipy's minimum."""
+    Q = np.array([[2.8, -0.5, 2.0], [-0.5, 2.3, -2.0], [2.0, -2.0, 4.4]])
+    D = np.array([1.3, 0.2, -0.6])
+    start = np.ones(3, dtype=bool)
+    expected = np.r_[np.linalg.solve(Q[:2, :2], D[:2]), 0.0]
+    staged = reconstruction_positive_only(Q, D, initial_passive=start, stable=[True, True, False])
+    at_once = reconstruction_positive_only(Q, D, initial_passive=start)
+    for result, outer in ((staged, 0), (at_once, 1)):
+        np.testing.assert_allclose(result.x, expected, rtol=1e-14, atol=0)
+        assert result.n_iterations == outer
+    np.testing.assert_allclose(staged.x, scipy_nnls(Q, D), rtol=1e-12, atol=1e-14)
+    with pytest.raises(ValueError, match="stable must have shape"):
+        reconstruction_positive_only(Q, D, initial_passive=start, stable=[True, False])
+
+
+def test_stable_unknowns_change_no_minimum(inversion_system):
+    """Source pixels stable, from starts with the light's final set inverted: scipy's
+    minimum and the KKT conditions."""
+    Q, D = inversion_system
+    reference = scipy_nnls(Q, D)
+    stable = np.arange(D.size) >= N_MGE
+    for flip in (slice(0, N_MGE), slice(None)):
+        start = reference > 0.0
+        start[flip] = ~start[flip]
+        result = reconstruction_positive_only(Q, D, initial_passive=start, stable=stable)
+        assert_same_minimum(Q, D, result.x, reference)
+        assert_kkt(Q, D, result)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_positive_negative_matches_numpy_solve(seed):
     Q, D = random_system(seed, 150, condition=1e3)

@@ -272,7 +272,9 @@ def _solve_without_factor_of_q(
     if given). Taken with a warm start, and when Q as a whole does not factorise
     (numerically singular outside the source block: lens-light columns that are nearly
     copies of each other, or whose scales differ by ~10¹⁹); the same minimum, without
-    the unconstrained start."""
+    the unconstrained start. The source unknowns are the warm start's ``stable`` ones
+    (:func:`~mgelens.inversion.nnls.reconstruction_positive_only`): between a phase's
+    samples its source pixels' passive set changes far less than its Gaussians'."""
     log_det_source = source_log_det
     if log_det_source is None:
         U = upper_cholesky(Q[source_block, source_block].copy())
@@ -280,7 +282,11 @@ def _solve_without_factor_of_q(
     if start is None:
         result = reconstruction_positive_only(reduced_q, reduced_d, use_initial_passive=False)
     else:
-        result = reconstruction_positive_only(reduced_q, reduced_d, initial_passive=start)
+        in_source = np.zeros(free.size, dtype=bool)
+        in_source[source_block] = True
+        result = reconstruction_positive_only(
+            reduced_q, reduced_d, initial_passive=start, stable=in_source[free]
+        )
     x = np.zeros(free.size)
     x[free] = result.x
     return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
