@@ -1182,6 +1182,38 @@ def test_nnls_warm_start_of_a_phase_changes_no_value(sersic_run, mock_dir, monke
         assert w == pytest.approx(c, rel=1e-10, abs=1e-7)
 
 
+def test_light_warm_start_is_the_union_of_seeded_prior_draws(sersic_run, mock_dir, monkeypatch):
+    """LIGHT samples only the lens light's shape: its NNLS starts from the union of the
+    passive sets of the fits at REFERENCE_LIGHT_DRAWS seeded prior draws (after the fit at
+    the medians, which checks that the phase can be fitted), two calls agree, and warm
+    values match cold starts to rounding. MASS keeps the medians' set."""
+    settings = sersic_settings(positive_only=True)
+    problem = light_phase.problem(mock_dir, sersic_run, settings, LENS)
+    assert all(name.startswith("lens_light.") for name in problem.space.free_names)
+    sets = []
+
+    def recording_fit(dataset, model, *arguments):
+        result = fit(dataset, model, *arguments)
+        sets.append(result.passive_set)
+        return result
+
+    monkeypatch.setattr(run, "fit", recording_fit)
+    start = run.reference_passive_set(problem)
+    assert len(sets) == 1 + run.REFERENCE_LIGHT_DRAWS
+    np.testing.assert_array_equal(start, np.logical_or.reduce(sets[1:]))
+    assert start.sum() > sets[0].sum()
+    np.testing.assert_array_equal(run.reference_passive_set(problem), start)
+    cold = run.PhaseLikelihood(problem.dataset, problem.space, problem.model)
+    warm = run.PhaseLikelihood(problem.dataset, problem.space, problem.model, None, start)
+    rng = np.random.default_rng(3)
+    for unit in rng.random((4, problem.space.n_free)):
+        x = problem.space.prior_transform(unit)
+        assert warm(x) == pytest.approx(cold(x), rel=1e-10, abs=1e-7)
+    sets.clear()
+    run.reference_passive_set(mass_phase.problem(mock_dir, sersic_run, settings, LENS))
+    assert len(sets) == 1
+
+
 def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, mock_dir):
     """The quick profile samples MASS on two k-means meshes (seeds 0 and 1) and pools the
     runs with equal weights; the maximum-likelihood fit is rebuilt on the mesh of the run

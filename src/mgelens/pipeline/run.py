@@ -120,8 +120,15 @@ ISOTHERMAL_SLOPE = 2.0
 """EPL slope of the SIE, the mass model of the phases before MASS."""
 
 
+REFERENCE_LIGHT_DRAWS = 16
+"""Prior draws (seeded, the same in every run) whose fits' passive sets, joined, start the
+NNLS of a phase that samples the lens light's shape (:func:`reference_passive_set`)."""
+
+
 def reference_passive_set(problem: PhaseProblem) -> np.ndarray | None:
-    """Final NNLS passive set of the fit at the prior medians, or ``None``.
+    """The NNLS warm start of a phase's samples: the final passive set of the fit at the
+    prior medians, the union of those of :data:`REFERENCE_LIGHT_DRAWS` prior draws where
+    the phase samples the lens light's shape, or ``None``.
 
     A free EPL slope (MASS), the one parameter whose prior is not passed from an earlier
     phase, is set to 2 instead of its prior median 2.25: the reference is then the SIE
@@ -132,22 +139,48 @@ def reference_passive_set(problem: PhaseProblem) -> np.ndarray | None:
     Gaussian, or the source pixel of the same image-plane centre (SP, SPix1, LIGHT,
     MASS): the samples' final passive sets lie closer to the reference's than to the
     unconstrained solution's positive set (the default start), so the NNLS needs fewer
-    outer iterations (docs/design_notes.md, "Warm-started solves"). ``None`` where the
-    unknowns move (SPix2's k-means
-    mesh is recomputed per sample), for the unconstrained solve, or when the reference
-    cannot be fitted.
+    outer iterations (docs/design_notes.md, "Warm-started solves"). Where the phase
+    samples only the lens light's non-linear parameters (LIGHT), which Gaussians are
+    non-zero changes from sample to sample and the medians' set shares few of them with
+    the posterior's; the union of the draws' sets holds most of every sample's, and the
+    NNLS drops the Gaussians it does not need first and cheaply (the source unknowns are
+    its ``stable`` ones; docs/benchmarks.md, "A union of prior draws as LIGHT's warm
+    start"). ``None`` where the unknowns move (SPix2's k-means mesh is recomputed per
+    sample), for the unconstrained solve, or when the medians cannot be fitted.
     """
     if not (problem.dataset.settings.positive_only and problem.model.stable_unknowns):
         return None
-    values = problem.space.values(problem.space.prior_transform(np.full(problem.space.n_free, 0.5)))
-    if "mass.slope" in problem.space.free_names:
-        values["mass.slope"] = ISOTHERMAL_SLOPE
+    space = problem.space
     try:
-        reference = fit(problem.dataset, problem.model.build(values))
+        reference = _fitted_passive_set(problem, np.full(space.n_free, 0.5))
     except (models.UnphysicalSample, *FitError) as error:
         logger.info("NNLS warm start off: the prior medians cannot be fitted (%s)", error)
         return None
-    return reference.passive_set
+    if not _samples_only_light_shape(space.free_names):
+        return reference
+    union = np.zeros_like(reference)
+    draws = np.random.default_rng(0).uniform(size=(REFERENCE_LIGHT_DRAWS, space.n_free))
+    for unit in draws:
+        try:
+            union |= _fitted_passive_set(problem, unit)
+        except (models.UnphysicalSample, *FitError):
+            continue
+    return union if union.any() else reference
+
+
+def _fitted_passive_set(problem: PhaseProblem, unit: np.ndarray) -> np.ndarray:
+    """Final NNLS passive set of the cold fit at unit-cube point ``unit`` (the slope, if
+    free, at :data:`ISOTHERMAL_SLOPE`)."""
+    values = problem.space.values(problem.space.prior_transform(unit))
+    if "mass.slope" in problem.space.free_names:
+        values["mass.slope"] = ISOTHERMAL_SLOPE
+    return fit(problem.dataset, problem.model.build(values)).passive_set
+
+
+def _samples_only_light_shape(free_names) -> bool:
+    """Whether the free parameters are all the lens light's (LIGHT: mass and source
+    fixed)."""
+    return all(name.startswith("lens_light.") for name in free_names)
 
 
 def scored_fit(problem: PhaseProblem, values: dict[str, float]) -> FitResult:
