@@ -7,7 +7,10 @@ source system, its reference passive set from the prior medians, exactly as
 ``mgelens phase`` does) and times the sampler's own likelihood on
 
 * ``prior``: uniform draws from the whole prior (a nested sampler's first iterations);
-* ``centre``: draws within ±5 % of the unit cube around the prior medians (its last).
+* ``centre``: draws within ±5 % of the unit cube around the prior medians (its last);
+* ``samples`` (with ``--samples FOLDER``): ``--draws`` rows of a finished run's
+  ``FOLDER/samples.csv`` under ``--results``, evenly spaced in run order (the sampler's
+  own path from the prior to the posterior, where the NNLS warm start is tested).
 
 One numba and one BLAS thread (the jobs' thread policy). It prints ``draws_cpu_ms_<phase>_
 <kind>`` (median) and ``..._mean`` per kind, and the sum of ln L over the accepted draws,
@@ -29,6 +32,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from common import host_yardstick_ms, set_threads
 
 from mgelens.pipeline.run import PhaseLikelihood, build_problem, reference_passive_set
@@ -43,6 +47,14 @@ def unit_draws(kind: str, n_free: int, n_draws: int, rng: np.random.Generator) -
     return 0.5 + 0.05 * rng.uniform(-1.0, 1.0, size=(n_draws, n_free))
 
 
+def run_samples(samples: Path, names, n_draws: int) -> list[np.ndarray]:
+    """Free-parameter vectors of ``n_draws`` rows of a run's samples table, evenly spaced
+    in run order."""
+    table = pd.read_csv(samples)
+    rows = np.unique(np.linspace(0, len(table) - 1, n_draws).round().astype(int))
+    return [table.iloc[i][list(names)].to_numpy(dtype=float) for i in rows]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--lens-dir", type=Path, required=True)
@@ -53,6 +65,12 @@ def main() -> None:
     parser.add_argument("--no-point-set", action="store_true")
     parser.add_argument("--profile", default="quick", choices=("quick", "paper"))
     parser.add_argument("--draws", type=int, default=60, help="timed calls per kind")
+    parser.add_argument(
+        "--samples",
+        default=None,
+        help="a finished run's folder under --results (e.g. light_x6_point): also time "
+        "the calls at its samples.csv rows",
+    )
     parser.add_argument(
         "--slam",
         type=json.loads,
@@ -72,11 +90,16 @@ def main() -> None:
     rng = np.random.default_rng(0)
     print(f"lens: {args.lens_dir.name}  phase: {args.phase}  free: {problem.space.n_free}")
     print(f"host_yardstick_cpu_ms: {host_yardstick_ms():.1f}")
-    for kind in ("prior", "centre"):
-        points = [
-            problem.space.prior_transform(u)
-            for u in unit_draws(kind, problem.space.n_free, args.draws, rng)
-        ]
+    kinds = ("prior", "centre") if args.samples is None else ("prior", "centre", "samples")
+    for kind in kinds:
+        if kind == "samples":
+            samples = args.results / args.samples / "samples.csv"
+            points = run_samples(samples, problem.space.free_names, args.draws)
+        else:
+            points = [
+                problem.space.prior_transform(u)
+                for u in unit_draws(kind, problem.space.n_free, args.draws, rng)
+            ]
         likelihood(points[0])  # warm-up: compiles, fills the phase's caches
         times, values = [], []
         for point in points:

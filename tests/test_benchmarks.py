@@ -47,3 +47,17 @@ def test_bench_phases_times_every_phase_of_a_real_lens(slacs_dir):
     stages = re.findall(r"^stage_ms_spix2_kmeans: ([0-9.]+)$", run.stdout, flags=re.MULTILINE)
     assert len(stages) == 1
     assert float(stages[0]) > 0
+
+
+def test_bench_phase_draws_takes_a_runs_samples_evenly_in_run_order(tmp_path, monkeypatch):
+    """``--samples``: the rows are spread over the whole run, first and last included,
+    each in the free parameters' order whatever the table's column order."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    from bench_phase_draws import run_samples
+
+    names = ("b", "a")
+    table = tmp_path / "samples.csv"
+    table.write_text("weight,a,b\n" + "".join(f"0.1,{i},{10 * i}\n" for i in range(11)))
+    points = run_samples(table, names, 6)
+    assert [p.tolist() for p in points] == [[10.0 * i, float(i)] for i in (0, 2, 4, 6, 8, 10)]
+    assert len(run_samples(table, names, 40)) == 11
