@@ -231,8 +231,9 @@ def _feasible_start(
         while z_min <= tol:
             n_inner = _counted(n_inner, max_iterations, "inner")
             leaving = z[factor.passive_order] <= tol
-            if stable is not None and np.any(leaving & ~stable[factor.passive_order]):
-                leaving &= ~stable[factor.passive_order]
+            if stable is not None:
+                unstable = leaving & ~stable[factor.passive_order]
+                leaving = unstable if unstable.any() else leaving
             positions = np.flatnonzero(leaving)[::-1]
             passive[factor.passive_order[positions]] = False
             factor.remove(positions)

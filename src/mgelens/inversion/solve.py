@@ -229,7 +229,7 @@ def _solve_source_first(
     reduced_q, reduced_d = (Q, D) if free.all() else (Q[np.ix_(free, free)], D[free])
     if positive_only and start is not None:
         return _solve_without_factor_of_q(
-            Q, reduced_q, reduced_d, free, source_block, start, source_log_det
+            Q, reduced_q, reduced_d, free, source_block, in_source, start, source_log_det
         )
     order = np.concatenate([a, e, m])
     try:
@@ -237,7 +237,9 @@ def _solve_source_first(
     except InversionError:
         if not positive_only:
             raise
-        return _solve_without_factor_of_q(Q, reduced_q, reduced_d, free, source_block, None)
+        return _solve_without_factor_of_q(
+            Q, reduced_q, reduced_d, free, source_block, in_source, None
+        )
     x = np.zeros(n)
     log_det_source = float(2.0 * np.sum(np.log(np.diag(U)[:n_s])))
     work = np.empty(n)
@@ -263,6 +265,7 @@ def _solve_without_factor_of_q(
     reduced_d: np.ndarray,
     free: np.ndarray,
     source_block: slice,
+    in_source: np.ndarray,
     start: np.ndarray | None,
     source_log_det: float | None = None,
 ) -> LinearSolution:
@@ -272,7 +275,8 @@ def _solve_without_factor_of_q(
     if given). Taken with a warm start, and when Q as a whole does not factorise
     (numerically singular outside the source block: lens-light columns that are nearly
     copies of each other, or whose scales differ by ~10¹⁹); the same minimum, without
-    the unconstrained start. The source unknowns are the warm start's ``stable`` ones
+    the unconstrained start. The source unknowns (``in_source``, an (n,) bool mask of
+    ``source_block``) are the warm start's ``stable`` ones
     (:func:`~mgelens.inversion.nnls.reconstruction_positive_only`): between a phase's
     samples its source pixels' passive set changes far less than its Gaussians'."""
     log_det_source = source_log_det
@@ -282,8 +286,6 @@ def _solve_without_factor_of_q(
     if start is None:
         result = reconstruction_positive_only(reduced_q, reduced_d, use_initial_passive=False)
     else:
-        in_source = np.zeros(free.size, dtype=bool)
-        in_source[source_block] = True
         result = reconstruction_positive_only(
             reduced_q, reduced_d, initial_passive=start, stable=in_source[free]
         )
