@@ -155,6 +155,29 @@ def test_repeated_mass_and_source_reuse_the_source_system(sparse_pass, monkeypat
     assert dataset._source_cache.get("system") is None
 
 
+def test_the_source_system_keeps_the_factor_of_the_held_source_pixels():
+    """The factor a warm start borders (:meth:`SourceSystem.held_factor`) is the Cholesky
+    factor of F_SS + H over the held pixels, computed once per mask, the last one kept."""
+    dataset = make_dataset()
+    source = pixelized_source(dataset, ConstantSplit(0.5))
+    model = LensModel(mass=MASS, lens_light=lens_sets()[:1], source=source)
+    fit(dataset, model)
+    fit(dataset, model)
+    system = dataset._source_cache["system"]
+    block = system.curvature_regularization
+    held = np.random.default_rng(2).random(block.shape[0]) < 0.8
+    factor = system.held_factor(held)
+    kept = np.flatnonzero(held)
+    np.testing.assert_allclose(
+        factor.T @ factor, block[np.ix_(kept, kept)], rtol=0, atol=1e-12 * np.abs(block).max()
+    )
+    assert np.allclose(np.tril(factor, -1), 0.0)
+    assert system.held_factor(held.copy()) is factor
+    other = system.held_factor(~held)
+    assert other.shape == (np.count_nonzero(~held),) * 2
+    assert len(system._held_factors) == 1
+
+
 def test_parametric_source_joins_the_linear_system():
     blank = make_dataset(settings=FitSettings(lp_sub_size_centre=8, mge_diagonal=0.0))
     sets = lens_sets()[:1]

@@ -16,6 +16,7 @@ pn source) raises :class:`~mgelens.inversion.cholesky.InversionError`; a sampler
 sample (SPEC §8.4).
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,6 +105,7 @@ def solve_linear_system(
     passive_start: np.ndarray | None = None,
     unconstrained: slice | None = None,
     source_log_det: float | None = None,
+    held_source_factor: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> LinearSolution:
     """Solve the inversion's normal equations, optionally non-negative (SPEC §6.2–6.3).
 
@@ -145,6 +147,14 @@ def solve_linear_system(
         ln det of the source block if the caller has it (a source held fixed across
         calls, :class:`mgelens.fit.SourceSystem`): the warm-started non-negative solve
         then factorises no source block of its own. Other solves ignore it.
+    held_source_factor : callable, optional
+        With ``source_log_det``: maps the (n_source,) bool mask of the source unknowns in
+        ``passive_start`` to the upper Cholesky factor of the source block over them
+        (ascending), which the warm-started NNLS borders instead of factorising them
+        again (a caller whose source block is fixed across calls caches it:
+        :meth:`mgelens.fit.SourceSystem.held_factor`). Without ``source_log_det`` the
+        solve takes that factor from the source block's own, factorised with the held
+        unknowns first. Either way the rounding changes, not the solution.
 
     Returns
     -------
@@ -179,7 +189,9 @@ def solve_linear_system(
             raise ValueError(f"passive_start must have shape ({n},), got {start.shape}")
         start = start[free]
     if source_block is not None:
-        return _solve_source_first(Q, D, positive_only, free, source_block, start, source_log_det)
+        return _solve_source_first(
+            Q, D, positive_only, free, source_block, start, source_log_det, held_source_factor
+        )
     if not positive_only:
         x = reconstruction_positive_negative(Q, D)
         return LinearSolution(x, False, np.zeros(n, dtype=bool), 0)
@@ -202,6 +214,7 @@ def _solve_source_first(
     source_block: slice,
     start: np.ndarray | None,
     source_log_det: float | None = None,
+    held_source_factor: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> LinearSolution:
     """:func:`solve_linear_system` with one Cholesky of Q ordered (A, E, M).
 
@@ -229,7 +242,15 @@ def _solve_source_first(
     reduced_q, reduced_d = (Q, D) if free.all() else (Q[np.ix_(free, free)], D[free])
     if positive_only and start is not None:
         return _solve_without_factor_of_q(
-            Q, reduced_q, reduced_d, free, source_block, in_source, start, source_log_det
+            Q,
+            reduced_q,
+            reduced_d,
+            free,
+            source_block,
+            in_source,
+            start,
+            source_log_det,
+            held_source_factor,
         )
     order = np.concatenate([a, e, m])
     try:
@@ -268,6 +289,7 @@ def _solve_without_factor_of_q(
     in_source: np.ndarray,
     start: np.ndarray | None,
     source_log_det: float | None = None,
+    held_source_factor: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> LinearSolution:
     """The positive-only solve of :func:`_solve_source_first` without a factor of Q: the
     NNLS from the passive set ``start`` (None: the empty set), which factorises only the
@@ -278,16 +300,36 @@ def _solve_without_factor_of_q(
     the unconstrained start. The source unknowns (``in_source``, an (n,) bool mask of
     ``source_block``) are the warm start's ``stable`` ones
     (:func:`~mgelens.inversion.nnls.reconstruction_positive_only`): between a phase's
-    samples its source pixels' passive set changes far less than its Gaussians'."""
+    samples its source pixels' passive set changes far less than its Gaussians'.
+
+    With a start and no fixed unknowns, the NNLS's first factor borders the factor of the
+    start's source unknowns (``held_source_factor``'s, or the leading block of the source
+    block's own factor, taken with those unknowns first: its log det does not depend on
+    the order) instead of factorising them a second time."""
+    held = None if start is None or not free.all() else start[source_block]
     log_det_source = source_log_det
+    leading = None
     if log_det_source is None:
-        U = upper_cholesky(Q[source_block, source_block].copy())
+        block = Q[source_block, source_block]
+        if held is None:
+            U = upper_cholesky(block.copy())
+        else:
+            order = np.concatenate([np.flatnonzero(held), np.flatnonzero(~held)])
+            U = upper_cholesky(block[np.ix_(order, order)])
+            m = int(np.count_nonzero(held))
+            leading = np.ascontiguousarray(U[:m, :m])
         log_det_source = float(2.0 * np.sum(np.log(np.diag(U))))
+    elif held is not None and held_source_factor is not None:
+        leading = held_source_factor(held)
     if start is None:
         result = reconstruction_positive_only(reduced_q, reduced_d, use_initial_passive=False)
     else:
         result = reconstruction_positive_only(
-            reduced_q, reduced_d, initial_passive=start, stable=in_source[free]
+            reduced_q,
+            reduced_d,
+            initial_passive=start,
+            stable=in_source[free],
+            leading_factor=leading,
         )
     x = np.zeros(free.size)
     x[free] = result.x
