@@ -155,9 +155,10 @@ def test_repeated_mass_and_source_reuse_the_source_system(sparse_pass, monkeypat
     assert dataset._source_cache.get("system") is None
 
 
-def test_the_source_system_keeps_the_factor_of_the_held_source_pixels():
-    """The factor a warm start borders (:meth:`SourceSystem.held_factor`) is the Cholesky
-    factor of F_SS + H over the held pixels, computed once per mask, the last one kept."""
+def test_the_source_system_keeps_the_factor_of_its_source_block():
+    """The factor a warm start's Schur complement uses
+    (:attr:`SourceSystem.curvature_regularization_factor`) is the Cholesky factor of
+    F_SS + H, and its diagonal gives the system's ln det(F_SS + H)."""
     dataset = make_dataset()
     source = pixelized_source(dataset, ConstantSplit(0.5))
     model = LensModel(mass=MASS, lens_light=lens_sets()[:1], source=source)
@@ -165,17 +166,12 @@ def test_the_source_system_keeps_the_factor_of_the_held_source_pixels():
     fit(dataset, model)
     system = dataset._source_cache["system"]
     block = system.curvature_regularization
-    held = np.random.default_rng(2).random(block.shape[0]) < 0.8
-    factor = system.held_factor(held)
-    kept = np.flatnonzero(held)
-    np.testing.assert_allclose(
-        factor.T @ factor, block[np.ix_(kept, kept)], rtol=0, atol=1e-12 * np.abs(block).max()
-    )
+    factor = system.curvature_regularization_factor
+    np.testing.assert_allclose(factor.T @ factor, block, rtol=0, atol=1e-12 * np.abs(block).max())
     assert np.allclose(np.tril(factor, -1), 0.0)
-    assert system.held_factor(held.copy()) is factor
-    other = system.held_factor(~held)
-    assert other.shape == (np.count_nonzero(~held),) * 2
-    assert len(system._held_factors) == 1
+    assert system.log_det_curvature_regularization == pytest.approx(
+        np.linalg.slogdet(block)[1], rel=1e-12
+    )
 
 
 def test_parametric_source_joins_the_linear_system():

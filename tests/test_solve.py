@@ -11,14 +11,13 @@ import scipy.optimize
 import scipy.sparse
 from scipy.spatial import KDTree
 
+from mgelens.inversion import solve as solve_module
 from mgelens.inversion.cholesky import InversionError, upper_cholesky
-from mgelens.inversion.nnls import (
-    _PassiveCholesky,
-    _step_to_boundary,
-    reconstruction_positive_only,
-)
+from mgelens.inversion.nnls import NNLSResult, _step_to_boundary, reconstruction_positive_only
 from mgelens.inversion.solve import (
+    SOURCE_ROUNDS,
     _reduced_solve,
+    _source_schur_solve,
     reconstruction_positive_negative,
     solve_linear_system,
 )
@@ -216,71 +215,69 @@ def test_stable_unknowns_change_no_minimum(inversion_system):
         assert_kkt(Q, D, result)
 
 
-def test_a_leading_factor_is_bordered_into_the_factor_of_the_start(inversion_system):
-    """The first factor of a warm start whose stable unknowns come factorised (the source
-    block's factor, reused) equals a fresh Cholesky of the whole start, and the NNLS
-    reaches the same minimum along the same iterations."""
+@pytest.mark.parametrize("flip", [0, 40, 400])
+def test_the_source_schur_complement_reaches_the_nnls_minimum(inversion_system, flip):
+    """From the final passive set with ``flip`` source pixels and a third of the light
+    Gaussians flipped, the rounds on the source block's Schur complement settle on
+    scipy's minimum with the KKT conditions met; allowed one round only, they hand on
+    the set they reached, from which the full NNLS reaches the same minimum."""
     Q, D = inversion_system
-    stable = np.arange(D.size) >= N_MGE
     reference = scipy_nnls(Q, D)
     start = reference > 0.0
-    start[: N_MGE // 2] = True  # some light Gaussians that must leave again
-    held = np.flatnonzero(start & stable)
-    leading = upper_cholesky(Q[np.ix_(held, held)])
-    order = np.concatenate([held, np.flatnonzero(start & ~stable)])
-    fresh, bordered = _PassiveCholesky(Q, D), _PassiveCholesky(Q, D)
-    fresh.reset(order)
-    bordered.reset_bordering(order, leading)
-    p = order.size
-    scale = np.abs(fresh.U[:p, :p]).max()
-    np.testing.assert_allclose(
-        np.triu(bordered.U[:p, :p]), np.triu(fresh.U[:p, :p]), rtol=0, atol=1e-11 * scale
-    )
-    np.testing.assert_allclose(bordered.y[:p], fresh.y[:p], rtol=1e-10)
-    plain = reconstruction_positive_only(Q, D, initial_passive=start, stable=stable)
-    shared = reconstruction_positive_only(
-        Q, D, initial_passive=start, stable=stable, leading_factor=leading
-    )
-    assert_same_minimum(Q, D, shared.x, reference)
-    np.testing.assert_array_equal(shared.passive, plain.passive)
-    assert shared.n_iterations == plain.n_iterations
-    with pytest.raises(ValueError, match="leading_factor must be"):
-        reconstruction_positive_only(
-            Q, D, initial_passive=start, stable=stable, leading_factor=leading[1:, 1:]
-        )
-    with pytest.raises(ValueError, match="needs initial_passive and stable"):
-        reconstruction_positive_only(Q, D, initial_passive=start, leading_factor=leading)
+    rng = np.random.default_rng(flip)
+    start[rng.choice(N_MGE, N_MGE // 3, replace=False)] ^= True
+    start[N_MGE + rng.choice(D.size - N_MGE, flip, replace=False)] ^= True
+    in_source = np.arange(D.size) >= N_MGE
+    factor = upper_cholesky(Q[N_MGE:, N_MGE:].copy())
+    x, rounds = _source_schur_solve(Q, D, in_source, start, factor, SOURCE_ROUNDS)
+    assert 1 <= rounds <= SOURCE_ROUNDS
+    assert_same_minimum(Q, D, x, reference)
+    assert_kkt(Q, D, NNLSResult(x, x > 0.0, rounds))
+    if rounds > 1:
+        reached = _source_schur_solve(Q, D, in_source, start, factor, rounds=1)
+        assert reached.dtype == bool
+        assert reached.shape == start.shape
+        final = reference > 0.0
+        assert np.count_nonzero(reached != final) < np.count_nonzero(start != final)
+        result = reconstruction_positive_only(Q, D, initial_passive=reached, stable=in_source)
+        assert_same_minimum(Q, D, result.x, reference)
 
 
-def test_a_held_source_factor_from_the_caller_is_used(inversion_system):
-    """With ln det of the source block given (a fixed source), the warm-started solve asks
-    the caller for the factor of the start's source pixels, borders it, and reaches the
-    minimum of the solve that factorises everything itself."""
+def test_a_source_factor_from_the_caller_is_used(inversion_system, monkeypatch):
+    """With ln det of the source block given (a fixed source), the warm-started solve
+    works with the caller's factor of the source block and reaches the minimum of the
+    solve that factorises everything itself; with one round allowed, the full NNLS
+    finishes from the set the round reached."""
     Q, D = inversion_system
     source = slice(N_MGE, None)
     cold = solve_linear_system(Q, D, source_block=source)
     start = ~cold.active_zero
     start[:N_MGE] = True
-    asked = []
+    start[N_MGE + np.random.default_rng(5).choice(D.size - N_MGE, 40, replace=False)] ^= True
+    factor = upper_cholesky(Q[source, source].copy())
+    full_runs = []
+    full_nnls = solve_module.reconstruction_positive_only
 
-    def held_factor(held):
-        asked.append(held.copy())
-        kept = N_MGE + np.flatnonzero(held)
-        return upper_cholesky(Q[np.ix_(kept, kept)])
+    def counted(*args, **kwargs):
+        full_runs.append("stable" in kwargs)
+        return full_nnls(*args, **kwargs)
 
-    given = solve_linear_system(
-        Q,
-        D,
-        source_block=source,
-        passive_start=start,
-        source_log_det=cold.log_det_source,
-        held_source_factor=held_factor,
-    )
-    np.testing.assert_array_equal(asked[0], start[source])
-    assert len(asked) == 1
-    np.testing.assert_allclose(given.x, cold.x, rtol=0, atol=1e-9 * np.abs(cold.x).max())
-    np.testing.assert_array_equal(given.active_zero, cold.active_zero)
-    assert given.log_det_source == cold.log_det_source
+    monkeypatch.setattr(solve_module, "reconstruction_positive_only", counted)
+    for rounds in (SOURCE_ROUNDS, 1):
+        monkeypatch.setattr(solve_module, "SOURCE_ROUNDS", rounds)
+        full_runs.clear()
+        given = solve_linear_system(
+            Q,
+            D,
+            source_block=source,
+            passive_start=start,
+            source_log_det=cold.log_det_source,
+            source_factor=factor,
+        )
+        assert any(full_runs) == (rounds == 1)
+        np.testing.assert_allclose(given.x, cold.x, rtol=0, atol=1e-9 * np.abs(cold.x).max())
+        np.testing.assert_array_equal(given.active_zero, cold.active_zero)
+        assert given.log_det_source == cold.log_det_source
 
 
 @pytest.mark.parametrize("seed", range(3))

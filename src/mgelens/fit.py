@@ -25,7 +25,6 @@ from mgelens.grid import SubGrid, pixel_centres, sub_grid, to_native
 from mgelens.imaging import Imaging
 from mgelens.inversion.cholesky import InversionError, upper_cholesky
 from mgelens.inversion.evidence import (
-    log_det_cholesky,
     log_det_regularization,
     log_evidence,
     log_likelihood,
@@ -494,21 +493,7 @@ class SourceSystem:
     log_det_curvature_regularization: float
     log_det_regularization: float
     weighted_blurred: WeightedBlurredMapping | None
-    _held_factors: dict = field(default_factory=dict, init=False, repr=False)
-
-    def held_factor(self, held: np.ndarray) -> np.ndarray:
-        """Upper Cholesky factor of F_SS + H over the source pixels ``held`` ((n_source,)
-        bool), ascending: the warm start's source pixels, which the NNLS then need not
-        factorise on every call. The last mask's factor is kept (a phase's warm start
-        is the same on every call)."""
-        key = np.packbits(held).tobytes()
-        if key not in self._held_factors:
-            kept = np.flatnonzero(held)
-            self._held_factors.clear()
-            self._held_factors[key] = upper_cholesky(
-                self.curvature_regularization[np.ix_(kept, kept)]
-            )
-        return self._held_factors[key]
+    curvature_regularization_factor: np.ndarray
 
     @classmethod
     def build(cls, dataset: FitDataset, mass, source: "PixelizedSource") -> "SourceSystem":
@@ -523,9 +508,9 @@ class SourceSystem:
             if WeightedBlurredMapping.cheaper(blurred, operator.mapping, dataset.convolver)
             else None
         )
-        return cls(
-            operator, f_ss, log_det_cholesky(f_ss), log_det_regularization(h), weighted_blurred
-        )
+        factor = upper_cholesky(f_ss.copy())
+        log_det = float(2.0 * np.sum(np.log(np.diag(factor))))
+        return cls(operator, f_ss, log_det, log_det_regularization(h), weighted_blurred, factor)
 
     def curvature(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
         """The full [dense | source] matrix F + H for new ``dense`` columns L of
@@ -639,7 +624,7 @@ def fit(
         passive_start=passive_start,
         unconstrained=slice(lens_columns.shape[1], None) if settings.free_source else None,
         source_log_det=None if system is None else system.log_det_curvature_regularization,
-        held_source_factor=None if system is None else system.held_factor,
+        source_factor=None if system is None else system.curvature_regularization_factor,
     )
     result = _scored(
         dataset, model, solution, fixed, lens_columns, source_columns, operator, system

@@ -72,7 +72,6 @@ progress).
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg.blas
 import scipy.linalg.lapack
 
 from mgelens._jit import njit
@@ -121,7 +120,7 @@ def reconstruction_positive_only(
     max_iterations: int = MAX_ITERATIONS,
     unconstrained: np.ndarray | None = None,
     stable: np.ndarray | None = None,
-    leading_factor: np.ndarray | None = None,
+    tolerance: float | None = None,
 ) -> NNLSResult:
     """Minimise Φ(x) = xᵀQx − 2Dᵀx subject to x ≥ 0 (fast NNLS, SPEC §6.3).
 
@@ -149,12 +148,10 @@ def reconstruction_positive_only(
         passive set. They are factorised first and leave the feasible start only when no
         other unknown of it has z_j ≤ tol (module docstring). Changes the iterates, not
         the minimum.
-    leading_factor : numpy.ndarray, optional
-        With ``initial_passive`` and ``stable``: the (m, m) upper Cholesky factor of Q over
-        the start's stable unknowns (``initial_passive & stable``, ascending), which the
-        caller may have from another use (the source block's log det). The first factor
-        then borders it with the other unknowns of the start instead of factorising them
-        all again. Changes the rounding only.
+    tolerance : float, optional
+        The absolute tolerance; n·EPSILON by default (the anchor's). A part of a larger
+        system (:func:`mgelens.inversion.solve.solve_linear_system`'s Schur complement)
+        passes the whole system's.
 
     Returns
     -------
@@ -170,7 +167,7 @@ def reconstruction_positive_only(
     """
     Q, D = validated_system(Q, D)
     n = D.size
-    tol = n * EPSILON
+    tol = n * EPSILON if tolerance is None else tolerance
     if initial_passive is None and use_initial_passive:
         if unconstrained is None:
             unconstrained = cholesky_solve(Q, D)
@@ -183,10 +180,7 @@ def reconstruction_positive_only(
         stable = _given_stable(stable, n)
         order = _stable_first(passive, stable)
     factor = _PassiveCholesky(Q, D)
-    if leading_factor is None:
-        factor.reset(order)
-    else:
-        factor.reset_bordering(order, _given_leading(leading_factor, passive, stable))
+    factor.reset(order)
     x, n_inner = _feasible_start(factor, passive, tol, max_iterations, stable)
     x, n_outer = _outer_iterations(Q, D, factor, passive, x, tol, max_iterations, n_inner)
     if not np.all(np.isfinite(x)):
@@ -212,21 +206,6 @@ def _given_stable(stable: np.ndarray | None, n: int) -> np.ndarray | None:
     if stable.shape != (n,):
         raise ValueError(f"stable must have shape ({n},), got {stable.shape}")
     return stable
-
-
-def _given_leading(
-    leading_factor: np.ndarray, passive: np.ndarray, stable: np.ndarray | None
-) -> np.ndarray:
-    """``leading_factor`` checked against the start's stable unknowns it must factorise."""
-    if stable is None:
-        raise ValueError("leading_factor needs initial_passive and stable")
-    m = int(np.count_nonzero(passive & stable))
-    if leading_factor.shape != (m, m):
-        raise ValueError(
-            f"leading_factor must be ({m}, {m}), the start's stable unknowns, "
-            f"got {leading_factor.shape}"
-        )
-    return leading_factor
 
 
 def _stable_first(passive: np.ndarray, stable: np.ndarray | None) -> np.ndarray:
@@ -368,33 +347,6 @@ class _PassiveCholesky:
         if info != 0:
             raise InversionError(f"passive-set matrix not positive definite (potrf info {info})")
         self.U[:p, :p] = block
-        forward_substitute_transposed(self.U, p, self.D[indices], self.y)
-
-    def reset_bordering(self, indices: np.ndarray, leading: np.ndarray) -> None:
-        """:meth:`reset` for ``indices`` whose first m have the upper factor ``leading``
-        (m, m): the rest border it by one triangular solve with m right-hand sides per new
-        unknown (BLAS trsm), a rank update and the factor of the small corner. A corner
-        that is not positive definite in rounding falls back to :meth:`reset`."""
-        m, p = leading.shape[0], indices.size
-        if m == 0:
-            self.reset(indices)
-            return
-        first, rest = indices[:m], indices[m:]
-        if rest.size:
-            # leading.T is the Fortran-ordered lower factor L = Uᵀ of Q[first, first]:
-            # solve L v = Q[first, rest] in place of its Fortran-ordered (m, p − m) copy
-            border = self.Q[np.ix_(rest, first)].T
-            v = scipy.linalg.blas.dtrsm(1.0, leading.T, border, lower=1, overwrite_b=1)
-            corner = self.Q[np.ix_(rest, rest)] - v.T @ v
-            _, info = scipy.linalg.lapack.dpotrf(corner.T, lower=1, clean=1, overwrite_a=1)
-            if info != 0:
-                self.reset(indices)
-                return
-            self.U[:m, m:p] = v
-            self.U[m:p, m:p] = corner
-        self.order[:p] = indices
-        self.p = p
-        self.U[:m, :m] = leading
         forward_substitute_transposed(self.U, p, self.D[indices], self.y)
 
     def append(self, indices: np.ndarray) -> None:

@@ -16,11 +16,11 @@ pn source) raises :class:`~mgelens.inversion.cholesky.InversionError`; a sampler
 sample (SPEC §8.4).
 """
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
+import scipy.linalg.blas
 
 from mgelens.inversion.cholesky import (
     InversionError,
@@ -30,10 +30,15 @@ from mgelens.inversion.cholesky import (
     validated_system,
 )
 from mgelens.inversion.nnls import (
+    EPSILON,
     back_substitute_scatter,
     forward_substitute_transposed,
     reconstruction_positive_only,
 )
+
+SOURCE_ROUNDS = 8
+"""Rounds of :func:`_source_schur_solve` (each a change of the source pixels held at
+zero) before the full NNLS takes over."""
 
 
 @dataclass(frozen=True)
@@ -105,7 +110,7 @@ def solve_linear_system(
     passive_start: np.ndarray | None = None,
     unconstrained: slice | None = None,
     source_log_det: float | None = None,
-    held_source_factor: Callable[[np.ndarray], np.ndarray] | None = None,
+    source_factor: np.ndarray | None = None,
 ) -> LinearSolution:
     """Solve the inversion's normal equations, optionally non-negative (SPEC §6.2–6.3).
 
@@ -147,14 +152,13 @@ def solve_linear_system(
         ln det of the source block if the caller has it (a source held fixed across
         calls, :class:`mgelens.fit.SourceSystem`): the warm-started non-negative solve
         then factorises no source block of its own. Other solves ignore it.
-    held_source_factor : callable, optional
-        With ``source_log_det``: maps the (n_source,) bool mask of the source unknowns in
-        ``passive_start`` to the upper Cholesky factor of the source block over them
-        (ascending), which the warm-started NNLS borders instead of factorising them
-        again (a caller whose source block is fixed across calls caches it:
-        :meth:`mgelens.fit.SourceSystem.held_factor`). Without ``source_log_det`` the
-        solve takes that factor from the source block's own, factorised with the held
-        unknowns first. Either way the rounding changes, not the solution.
+    source_factor : numpy.ndarray, optional
+        With ``source_log_det``: the upper Cholesky factor of the source block (a caller
+        whose source is fixed across calls keeps it:
+        :attr:`mgelens.fit.SourceSystem.curvature_regularization_factor`), so that the
+        warm-started non-negative solve can work on the source block's Schur complement
+        (:func:`_source_schur_solve`). Without ``source_log_det`` the solve factorises
+        the source block itself for both.
 
     Returns
     -------
@@ -190,7 +194,7 @@ def solve_linear_system(
         start = start[free]
     if source_block is not None:
         return _solve_source_first(
-            Q, D, positive_only, free, source_block, start, source_log_det, held_source_factor
+            Q, D, positive_only, free, source_block, start, source_log_det, source_factor
         )
     if not positive_only:
         x = reconstruction_positive_negative(Q, D)
@@ -214,7 +218,7 @@ def _solve_source_first(
     source_block: slice,
     start: np.ndarray | None,
     source_log_det: float | None = None,
-    held_source_factor: Callable[[np.ndarray], np.ndarray] | None = None,
+    source_factor: np.ndarray | None = None,
 ) -> LinearSolution:
     """:func:`solve_linear_system` with one Cholesky of Q ordered (A, E, M).
 
@@ -250,7 +254,7 @@ def _solve_source_first(
             in_source,
             start,
             source_log_det,
-            held_source_factor,
+            source_factor,
         )
     order = np.concatenate([a, e, m])
     try:
@@ -289,7 +293,7 @@ def _solve_without_factor_of_q(
     in_source: np.ndarray,
     start: np.ndarray | None,
     source_log_det: float | None = None,
-    held_source_factor: Callable[[np.ndarray], np.ndarray] | None = None,
+    source_factor: np.ndarray | None = None,
 ) -> LinearSolution:
     """The positive-only solve of :func:`_solve_source_first` without a factor of Q: the
     NNLS from the passive set ``start`` (None: the empty set), which factorises only the
@@ -302,25 +306,19 @@ def _solve_without_factor_of_q(
     (:func:`~mgelens.inversion.nnls.reconstruction_positive_only`): between a phase's
     samples its source pixels' passive set changes far less than its Gaussians'.
 
-    With a start and no fixed unknowns, the NNLS's first factor borders the factor of the
-    start's source unknowns (``held_source_factor``'s, or the leading block of the source
-    block's own factor, taken with those unknowns first: its log det does not depend on
-    the order) instead of factorising them a second time."""
-    held = None if start is None or not free.all() else start[source_block]
-    log_det_source = source_log_det
-    leading = None
+    With a start and no fixed unknowns, the source block's factor (its own, computed for
+    its log det, or ``source_factor``) first serves :func:`_source_schur_solve`,
+    which needs no factor of the whole passive set; the full NNLS runs only where its
+    rounds do not settle, from the passive set they reached."""
+    log_det_source, factor = source_log_det, source_factor
     if log_det_source is None:
-        block = Q[source_block, source_block]
-        if held is None:
-            U = upper_cholesky(block.copy())
-        else:
-            order = np.concatenate([np.flatnonzero(held), np.flatnonzero(~held)])
-            U = upper_cholesky(block[np.ix_(order, order)])
-            m = int(np.count_nonzero(held))
-            leading = np.ascontiguousarray(U[:m, :m])
-        log_det_source = float(2.0 * np.sum(np.log(np.diag(U))))
-    elif held is not None and held_source_factor is not None:
-        leading = held_source_factor(held)
+        factor = upper_cholesky(Q[source_block, source_block].copy())
+        log_det_source = float(2.0 * np.sum(np.log(np.diag(factor))))
+    if start is not None and factor is not None and free.all():
+        solved = _source_schur_solve(Q, reduced_d, in_source, start, factor, SOURCE_ROUNDS)
+        if isinstance(solved, tuple):
+            return LinearSolution(solved[0], True, solved[0] == 0.0, solved[1], log_det_source)
+        start = solved
     if start is None:
         result = reconstruction_positive_only(reduced_q, reduced_d, use_initial_passive=False)
     else:
@@ -329,11 +327,92 @@ def _solve_without_factor_of_q(
             reduced_d,
             initial_passive=start,
             stable=in_source[free],
-            leading_factor=leading,
         )
     x = np.zeros(free.size)
     x[free] = result.x
     return LinearSolution(x, True, x == 0.0, result.n_iterations, log_det_source)
+
+
+def _source_schur_solve(
+    Q: np.ndarray,
+    D: np.ndarray,
+    in_source: np.ndarray,
+    start: np.ndarray,
+    factor: np.ndarray,
+    rounds: int,
+) -> tuple[np.ndarray, int] | np.ndarray:
+    """The NNLS minimum found on the Schur complement of the source block and the rounds
+    it took, or, where the rounds below do not settle, the passive set they reached (an
+    (n,) bool mask, a closer start than ``start`` for the full NNLS that then runs).
+
+    ``factor`` is the upper Cholesky factor U of the source block A = Q_ss (all source
+    pixels s, ascending); W = U⁻ᵀQ_sg and v = U⁻ᵀD_s for the unknowns g off the source.
+    The source pixels held at zero, R, start as those off ``start``. For a given R the
+    other source pixels are solved exactly: A without R has the inverse, padded with
+    zeros, A⁻¹ − E K⁻¹ Eᵀ with E = A⁻¹ on R's columns = U⁻¹G, G = U⁻ᵀ on R's unit
+    vectors, and K = GᵀG. So the g solve the NNLS of the g × g system
+    S = Q_gg − WᵀW + Cᵀ K⁻¹ C with data D_g − Wᵀv + Cᵀ K⁻¹ Gᵀv (C = GᵀW), from the start's
+    set of g and with the full system's tolerance (every active-set step g × g instead of
+    n × n, and A never factorised again), and the source pixels are
+    U⁻¹(y − G K⁻¹ (U⁻¹y)_R), y = v − W x_g. After each solve the source pixels at or below
+    the tolerance join R and those of R whose gradient D − Qx is above it leave; when
+    neither happens the point meets the full problem's KKT conditions and is its unique
+    minimum (Q is positive definite). At most ``rounds`` rounds."""
+    n = D.size
+    tol = n * EPSILON
+    s = np.flatnonzero(in_source)
+    g = np.flatnonzero(~in_source)
+    lower = factor.T  # Fortran-ordered lower factor Uᵀ
+    w = scipy.linalg.blas.dtrsm(1.0, lower, Q[np.ix_(g, s)].T, lower=1)
+    v = scipy.linalg.blas.dtrsv(lower, D[s], lower=1)
+    schur_full = Q[np.ix_(g, g)] - w.T @ w
+    data_full = D[g] - w.T @ v
+    zero = ~start[s]  # R, as a mask over s
+    columns = {}  # G's column of each source pixel that has been in R
+    passive_g = start[g].copy()
+    x = np.zeros(n)
+    for round_ in range(rounds):
+        r = np.flatnonzero(zero)
+        new = [j for j in r.tolist() if j not in columns]
+        if new:
+            unit = np.zeros((s.size, len(new)), order="F")
+            unit[new, np.arange(len(new))] = 1.0
+            solved = scipy.linalg.blas.dtrsm(1.0, lower, unit, lower=1, overwrite_b=1)
+            columns.update(zip(new, solved.T, strict=True))
+        schur, data = schur_full, data_full
+        if r.size:
+            g_r = np.array([columns[j] for j in r.tolist()]).T  # (m, r)
+            try:
+                k_lower = scipy.linalg.cholesky(g_r.T @ g_r, lower=True, check_finite=False)
+            except np.linalg.LinAlgError:  # K singular in rounding: the full NNLS decides
+                break
+            m = scipy.linalg.solve_triangular(k_lower, g_r.T @ w, lower=True)
+            mu = scipy.linalg.solve_triangular(k_lower, g_r.T @ v, lower=True)
+            schur = schur + m.T @ m
+            data = data + m.T @ mu
+        if g.size:
+            reduced = reconstruction_positive_only(
+                schur, data, initial_passive=passive_g, tolerance=tol
+            )
+            x[g] = reduced.x
+            passive_g = reduced.passive
+        y = v - w @ x[g]
+        source = scipy.linalg.blas.dtrsv(lower, y, lower=1, trans=1)
+        if r.size:
+            held = scipy.linalg.cho_solve((k_lower, True), source[r], check_finite=False)
+            source = scipy.linalg.blas.dtrsv(lower, y - g_r @ held, lower=1, trans=1)
+            source[r] = 0.0
+        x[s] = source
+        leaving = ~zero & (source <= tol)
+        entering = np.zeros_like(zero)
+        entering[r] = D[s[r]] - Q[s[r]] @ x > tol
+        if not leaving.any() and not entering.any():
+            return finite_solution(x), round_ + 1
+        zero = (zero | leaving) & ~entering
+    closer = np.zeros(n, dtype=bool)
+    closer[s[~zero]] = True
+    closer[g[passive_g]] = True
+    return closer
 
 
 def _reduced_solve(U: np.ndarray, n_a: int, n_s: int, b: np.ndarray, work: np.ndarray):
