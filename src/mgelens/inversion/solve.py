@@ -11,6 +11,11 @@ regularization, SPEC §6.1) and D the data vector. Minimising
   (:func:`mgelens.inversion.nnls.reconstruction_positive_only`);
 * either of them with some unknowns forced to zero (:func:`solve_linear_system`).
 
+A warm-started non-negative solve with a pixelized source first works on the Schur
+complement of the source block (:func:`_source_schur_solve`): the Gaussians' active set
+is then g × g instead of the whole system's, and the result is checked against the full
+problem's KKT conditions (the same unique minimum), with the full NNLS as the fallback.
+
 Every failure (Q not positive definite, non-finite solution, NNLS iteration cap, degenerate
 pn source) raises :class:`~mgelens.inversion.cholesky.InversionError`; a sampler rejects the
 sample (SPEC §8.4).
