@@ -23,7 +23,7 @@ from mgelens.convolve import trimmed_psf
 from mgelens.fit_settings import FitSettings
 from mgelens.grid import SubGrid, pixel_centres, sub_grid, to_native
 from mgelens.imaging import Imaging
-from mgelens.inversion.cholesky import InversionError, upper_cholesky
+from mgelens.inversion.cholesky import InversionError, factor_log_det, upper_cholesky
 from mgelens.inversion.evidence import (
     log_det_regularization,
     log_evidence,
@@ -509,7 +509,7 @@ class SourceSystem:
             else None
         )
         factor = upper_cholesky(f_ss.copy())
-        log_det = float(2.0 * np.sum(np.log(np.diag(factor))))
+        log_det = factor_log_det(factor)
         return cls(operator, f_ss, log_det, log_det_regularization(h), weighted_blurred, factor)
 
     def curvature(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:

@@ -36,6 +36,11 @@ def upper_cholesky(U: np.ndarray) -> np.ndarray:
     return U
 
 
+def factor_log_det(U: np.ndarray) -> float:
+    """ln det A = 2 Σ ln diag U of A = UᵀU (or LLᵀ) from its Cholesky factor."""
+    return float(2.0 * np.sum(np.log(np.diag(U))))
+
+
 def cholesky_solve(Q: np.ndarray, D: np.ndarray) -> np.ndarray:
     """Q⁻¹D by Cholesky; :class:`InversionError` if Q is not PD or Q⁻¹D is not finite."""
     try:

@@ -22,7 +22,7 @@ import scipy.linalg.lapack
 import scipy.sparse
 import scipy.sparse.linalg
 
-from mgelens.inversion.cholesky import InversionError
+from mgelens.inversion.cholesky import InversionError, factor_log_det
 
 
 def log_det_cholesky(A: np.ndarray) -> float:
@@ -49,7 +49,7 @@ def log_det_cholesky(A: np.ndarray) -> float:
     _, info = scipy.linalg.lapack.dpotrf(factor, lower=1, clean=0, overwrite_a=1)
     if info != 0:
         raise InversionError(f"matrix not positive definite (potrf info {info})")
-    return float(2.0 * np.sum(np.log(np.diag(factor))))
+    return factor_log_det(factor)
 
 
 def log_det_regularization(H) -> float:

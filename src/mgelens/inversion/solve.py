@@ -30,6 +30,7 @@ import scipy.linalg.blas
 from mgelens.inversion.cholesky import (
     InversionError,
     cholesky_solve,
+    factor_log_det,
     finite_solution,
     upper_cholesky,
     validated_system,
@@ -271,7 +272,7 @@ def _solve_source_first(
             Q, reduced_q, reduced_d, free, source_block, in_source, None
         )
     x = np.zeros(n)
-    log_det_source = float(2.0 * np.sum(np.log(np.diag(U)[:n_s])))
+    log_det_source = factor_log_det(U[:n_s, :n_s])
     work = np.empty(n)
     if not positive_only:
         y = np.empty(n)
@@ -318,7 +319,7 @@ def _solve_without_factor_of_q(
     log_det_source, factor = source_log_det, source_factor
     if log_det_source is None:
         factor = upper_cholesky(Q[source_block, source_block].copy())
-        log_det_source = float(2.0 * np.sum(np.log(np.diag(factor))))
+        log_det_source = factor_log_det(factor)
     if start is not None and factor is not None and free.all():
         solved = _source_schur_solve(Q, reduced_d, in_source, start, factor, SOURCE_ROUNDS)
         if isinstance(solved, tuple):
@@ -486,7 +487,7 @@ def _solve_partly_constrained(
         block = (
             upper_cholesky(Q[source_block, source_block].copy()) if np.any(free & ~in_source) else U
         )
-        log_det_source = float(2.0 * np.sum(np.log(np.diag(block))))
+        log_det_source = factor_log_det(block)
         _check_source_not_flat(x[source_block])
     active_zero = np.zeros(n, dtype=bool)
     active_zero[c] = x[c] == 0.0
