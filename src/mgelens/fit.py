@@ -485,15 +485,19 @@ class SourceOperator:
 @dataclass(frozen=True, eq=False)
 class SourceSystem:
     """The parts of the linear system that depend on mass and source only: the operator,
-    F_SS + H (dense) and its ln det, ln det H and, where it is the cheaper route to F_LS,
-    W B f."""
+    F_SS + H (dense) and its upper Cholesky factor, ln det H and, where it is the cheaper
+    route to F_LS, W B f."""
 
     operator: SourceOperator
     curvature_regularization: np.ndarray
-    log_det_curvature_regularization: float
+    curvature_regularization_factor: np.ndarray
     log_det_regularization: float
     weighted_blurred: WeightedBlurredMapping | None
-    curvature_regularization_factor: np.ndarray
+
+    @property
+    def log_det_curvature_regularization(self) -> float:
+        """ln det(F_SS + H), from its factor."""
+        return factor_log_det(self.curvature_regularization_factor)
 
     @classmethod
     def build(cls, dataset: FitDataset, mass, source: "PixelizedSource") -> "SourceSystem":
@@ -509,8 +513,7 @@ class SourceSystem:
             else None
         )
         factor = upper_cholesky(f_ss.copy())
-        log_det = factor_log_det(factor)
-        return cls(operator, f_ss, log_det, log_det_regularization(h), weighted_blurred, factor)
+        return cls(operator, f_ss, factor, log_det_regularization(h), weighted_blurred)
 
     def curvature(self, dense: np.ndarray, dataset: FitDataset) -> np.ndarray:
         """The full [dense | source] matrix F + H for new ``dense`` columns L of
