@@ -281,6 +281,22 @@ def test_arcs_support_adds_spix2s_arc_threshold_and_later_phases_keep_it(chain):
         centres = kmeans.centres({"mesh.weight_floor": 0.1, "mesh.weight_power": 2.0})
         assert all(np.array_equal(a, b) for a, b in zip(centres, expected, strict=True))
         assert kmeans.describe()["kmeans_seeding"] == seeding
+    noise = np.full(adapt.size, 0.1)
+    noise[: adapt.size // 2] = 0.5  # the lower half: arcs need 3 σ = 1.5 there, above the peak
+    floored = models.KMeansSourceModel(
+        x.ravel(), y.ravel(), adapt, 40, support="arcs", arc_noise_floor=3.0, noise_map=noise
+    )
+    expected = (adapt > 0.05 * adapt.max()) & (adapt > 3.0 * noise)
+    assert 0 < expected.sum() < (adapt > 0.05 * adapt.max()).sum()
+    assert np.array_equal(floored.build(values).arc_pixels, expected)
+    assert floored.describe()["arc_noise_floor"] == 3.0
+    assert "arc_noise_floor" not in kmeans.describe()
+    for support, noise_map in (("mask", noise), ("arcs", None)):
+        with pytest.raises(ValueError, match="noise floor needs the arcs' support and the noise"):
+            models.KMeansSourceModel(
+                x.ravel(), y.ravel(), adapt, 40, support=support, arc_noise_floor=3.0,
+                noise_map=noise_map,
+            )  # fmt: skip
     held = models.KMeansSourceModel(x.ravel(), y.ravel(), adapt, 40, support="arcs").fixed(
         {**spix2.max_likelihood, models.ARC_THRESHOLD: 0.05}
     )
@@ -591,6 +607,12 @@ def test_settings_from_yaml_override_the_profile(tmp_path):
         ({"mass_source_pixels": 2}, r"slam\.mass_source_pixels must be an integer >= 3, got 2"),
         ({"source_support": "ring"}, r"slam\.source_support must be one of \['mask', 'arcs'\]"),
         ({"kmeans_seeding": "random"}, r"slam\.kmeans_seeding must be one of \['kmeans\+\+', "),
+        ({"arc_noise_floor": -1}, r"slam\.arc_noise_floor must be a number >= 0, got -1"),
+        (
+            {"profile": "paper", "arc_noise_floor": 3},
+            r"slam\.arc_noise_floor: 3\.0 applies to the arcs' support only, not to "
+            "source_support: mask",
+        ),
         ({"overlay_shape": [24]}, r"slam\.overlay_shape must be two integers >= 2"),
         ({"fit": {"psf_trim": 1}}, r"slam\.fit\.psf_trim must be a number in \[0, 1\), got 1"),
         ({"allow_unconverged": "yes"}, r"slam\.allow_unconverged must be true or false"),

@@ -82,6 +82,15 @@ def test_arc_pixels_select_above_the_fraction_of_the_peak():
         arc_pixels(-adapt, 0.1)
 
 
+def test_a_noise_floor_keeps_only_arc_pixels_above_both():
+    """The relative threshold and the per-pixel floor must both be exceeded: a pixel above
+    the threshold but under its own floor (here its noise is high) is dropped."""
+    adapt = np.array([0.0, 0.5, 1.0, 2.0, 4.0])
+    floor = np.array([0.1, 0.1, 3.0, 1.0, 1.0])
+    assert arc_pixels(adapt, 0.2, floor).tolist() == [False, False, False, True, True]
+    assert arc_pixels(adapt, 0.05, floor).tolist() == [False, True, False, True, True]
+
+
 def test_reached_source_pixels_are_the_columns_the_arcs_weigh(lens):
     """Against the dense mapping matrix: a source pixel is reached when some arc pixel
     gives it a positive weight."""

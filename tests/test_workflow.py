@@ -391,10 +391,11 @@ def test_settings_of_mass_alone_reach_mass_only(tmp_path, section, key, slam):
 
 
 def test_source_support_reaches_the_phases_from_spix2_on(tmp_path):
-    """``source_support`` and ``kmeans_seeding`` change SPix2's model, so SPix2, LIGHT and
-    MASS get them, and SP and SPix1 keep their --slam (and their results)."""
+    """``source_support``, ``arc_noise_floor`` and ``kmeans_seeding`` change SPix2's model,
+    so SPix2, LIGHT and MASS get them, and SP and SPix1 keep their --slam (and their
+    results)."""
     (tmp_path / "config.yaml").write_text(
-        "slam:\n  source_support: arcs\n  kmeans_seeding: systematic\n"
+        "slam:\n  source_support: arcs\n  kmeans_seeding: systematic\n  arc_noise_floor: 3\n"
     )
     result = snakemake(
         "results/M1/mass/result.json", "-n", "-p", "--configfile",
@@ -407,6 +408,8 @@ def test_source_support_reaches_the_phases_from_spix2_on(tmp_path):
     assert with_support == {"spix2", "light", "mass"}
     seeded = {line.split()[0] for line in commands if '"kmeans_seeding": "systematic"' in line}
     assert seeded == {"spix2", "light", "mass"}
+    floored = {line.split()[0] for line in commands if '"arc_noise_floor": 3' in line}
+    assert floored == {"spix2", "light", "mass"}
     assert len(commands) == 5
 
 

@@ -535,8 +535,8 @@ def phase_settings(wildcards) -> str:
     """The config's slam: section as JSON, with the lens's `lens_light` settings
     (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
     changing one phase's sampler reruns that phase (and the phases after it) only;
-    `mass_source_pixels` goes to MASS only, `source_support` and `kmeans_seeding`
-    (the k-means mesh's) to the phases from SPix2 on, and `lens_light_prior` to LIGHT
+    `mass_source_pixels` goes to MASS only, `source_support`, `arc_noise_floor` and
+    `kmeans_seeding` (the k-means mesh's) to the phases from SPix2 on, and `lens_light_prior` to LIGHT
     and MASS, likewise. An SPix2 candidate (`spix2_n<count>`) gets its own count as
     `source_pixels`."""
     light = lens_light_settings(wildcards.lens)
@@ -550,6 +550,7 @@ def phase_settings(wildcards) -> str:
         section.pop("mass_source_pixels", None)
     if phase in ("sp", "spix1"):
         section.pop("source_support", None)
+        section.pop("arc_noise_floor", None)
         section.pop("kmeans_seeding", None)
     if phase in ("sp", "spix1", "spix2"):
         section.pop("lens_light_prior", None)

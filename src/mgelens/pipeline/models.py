@@ -385,6 +385,9 @@ class MeshSourceModel:
         Source support: only the source pixels reached by the image pixels where the adapt
         image exceeds this fraction of its peak are solved (:mod:`mgelens.source.support`);
         None: the whole traced mask.
+    arc_floor : ndarray or None
+        Slim (N_I,) floor the adapt image must also exceed in an arc pixel (data units;
+        k times the noise map for ``slam.arc_noise_floor`` k); None: no floor.
     """
 
     x: np.ndarray
@@ -396,12 +399,13 @@ class MeshSourceModel:
     mesh: str = "overlay"
     signals: str = "anchor"
     arc_threshold: float | None = None
+    arc_floor: np.ndarray | None = None
 
     def build(self, values: Mapping[str, float]) -> PixelizedSource:
         arcs = (
             None
             if self.arc_threshold is None
-            else support.arc_pixels(self.adapt_image, self.arc_threshold)
+            else support.arc_pixels(self.adapt_image, self.arc_threshold, self.arc_floor)
         )
         return PixelizedSource(
             self.x,
@@ -445,6 +449,13 @@ class KMeansSourceModel:
     support : {"mask", "arcs"}
         The source's support (``SlamSettings.source_support``): with ``arcs`` the
         hyper-parameter ``mesh.arc_threshold`` sets it.
+    seeding : str
+        k-means seeding (``SlamSettings.kmeans_seeding``).
+    arc_noise_floor : float
+        ``SlamSettings.arc_noise_floor`` k: an arc pixel's adapt image must also exceed k
+        times its noise (0: no floor; needs ``noise_map``).
+    noise_map : ndarray or None
+        Slim (N_I,) noise map σ (data units), for the arcs' noise floor.
     """
 
     pixel_x: np.ndarray
@@ -458,6 +469,15 @@ class KMeansSourceModel:
     signals: str = "anchor"
     support: str = "mask"
     seeding: str = "kmeans++"
+    arc_noise_floor: float = 0.0
+    noise_map: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.arc_noise_floor > 0.0 and (self.support != "arcs" or self.noise_map is None):
+            raise ValueError(
+                "an arcs' noise floor needs the arcs' support and the noise map "
+                f"(support {self.support!r}, noise map given: {self.noise_map is not None})"
+            )
 
     @classmethod
     def from_settings(
@@ -467,10 +487,13 @@ class KMeansSourceModel:
         adapt_image: np.ndarray,
         settings,
         n_pixels: int,
+        noise_map: np.ndarray | None = None,
     ) -> "KMeansSourceModel":
         """The k-means source of ``n_pixels`` pixels on these pixels and adapt image, with
-        the seed, scheme, interpolation, cross offset, adaptive signals, support and
-        seeding of ``settings`` (:class:`~mgelens.pipeline.settings.SlamSettings`)."""
+        the seed, scheme, interpolation, cross offset, adaptive signals, support, seeding
+        and arcs' noise floor of ``settings``
+        (:class:`~mgelens.pipeline.settings.SlamSettings`); ``noise_map`` (slim σ) is
+        needed for a noise floor."""
         return cls(
             pixel_x,
             pixel_y,
@@ -483,6 +506,8 @@ class KMeansSourceModel:
             settings.adaptive_signals,
             settings.source_support,
             settings.kmeans_seeding,
+            settings.arc_noise_floor,
+            noise_map,
         )
 
     def centres(self, values: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -524,6 +549,7 @@ class KMeansSourceModel:
             "kmeans",
             self.signals,
             values[ARC_THRESHOLD] if self.support == "arcs" else None,
+            self.arc_noise_floor * self.noise_map if self.arc_noise_floor > 0.0 else None,
         )
 
     def fixed(self, values: Mapping[str, float]) -> "FixedSourceModel":
@@ -551,6 +577,7 @@ class KMeansSourceModel:
             "adaptive_signals": self.signals,
             "source_support": self.support,
             "kmeans_seeding": self.seeding,
+            **({"arc_noise_floor": self.arc_noise_floor} if self.arc_noise_floor > 0.0 else {}),
         }
 
 

@@ -301,4 +301,7 @@ def kmeans_source(
         raise PhaseInputError(f"{path} not found: rerun phase 'spix1'")
     adapt = products.read_adapt_image(path, dataset.mask)
     x, y = dataset.pixel_centres
-    return models.KMeansSourceModel.from_settings(x, y, adapt, settings, n_pixels), path
+    source = models.KMeansSourceModel.from_settings(
+        x, y, adapt, settings, n_pixels, dataset.noise_map
+    )
+    return source, path

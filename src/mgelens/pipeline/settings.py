@@ -118,6 +118,12 @@ class SlamSettings:
         ring the image plane is singly imaged, and there the paper's source copies the
         lens light's outer wings (docs/recovery.md, "The source's support"). The quick
         profile's default is ``arcs``, the paper profile's ``mask``.
+    arc_noise_floor : float
+        With the arcs' support, an arc pixel's adapt image must also exceed this many
+        times the pixel's noise (arcs detected at k σ); 0 (both profiles): no floor, the
+        threshold alone. A relative threshold low enough to reach an earlier source's
+        faint smooth light lets the support cover the whole mask (docs/recovery.md,
+        "A noise floor for the arcs"). Only with ``source_support: arcs``.
     overlay_shape : (int, int)
         (n_y, n_x) of the SPix1 overlay grid (paper 34×34).
     spix1_regularization : {"constant", "constant_split"}
@@ -208,6 +214,7 @@ class SlamSettings:
     source_pixels: int | tuple[int, ...] = 1500
     mass_source_pixels: int | None = None
     source_support: str = "mask"
+    arc_noise_floor: float = 0.0
     overlay_shape: tuple[int, int] = (34, 34)
     spix1_regularization: str = "constant"
     kmeans_scheme: str = "2023"
@@ -240,6 +247,12 @@ class SlamSettings:
             raise SettingsError(f"slam.fit must be FitSettings, got {self.fit!r}")
         for name, value in checked.items():
             object.__setattr__(self, name, value)
+        if self.arc_noise_floor > 0.0 and self.source_support != "arcs":
+            raise SettingsError(
+                f"slam.arc_noise_floor: {self.arc_noise_floor} applies to the arcs' support "
+                f"only, not to source_support: {self.source_support}; set "
+                "source_support: arcs or arc_noise_floor: 0"
+            )
         if self.lens_light_prior != "none" and self.lens_light_model != "mge":
             raise SettingsError(
                 f"slam.lens_light_prior: {self.lens_light_prior} applies to the MGE lens "
@@ -342,6 +355,7 @@ _INTEGERS = {
 _NUMBERS = {
     "positions_factor": {"minimum": 0.0, "open_minimum": True},
     "positions_minimum": {"minimum": 0.0},
+    "arc_noise_floor": {"minimum": 0.0},
 }
 """Real-valued fields and their range (:func:`mgelens.values.number`)."""
 

@@ -7,7 +7,8 @@ image-plane light, and on 3″ masks it takes a large share of the lens light's 
 region its arcs reach:
 
 * the *arc pixels* are the image pixels where the adapt image Ξ (the lensed source of an
-  earlier fit, SPEC §4.1) exceeds ``threshold`` times its maximum;
+  earlier fit, SPEC §4.1) exceeds ``threshold`` times its maximum and, with a noise
+  floor, also ``floor`` (k times the pixel's noise: arcs detected at k σ);
 * the *support* is every source pixel that a traced sub-pixel of an arc pixel gives a
   non-zero interpolation weight (its natural neighbours, SPEC §4.4);
 * the other source pixels leave the linear system: their fluxes are zero, their rows and
@@ -22,8 +23,11 @@ import numpy as np
 from scipy import sparse
 
 
-def arc_pixels(adapt_image: np.ndarray, threshold: float) -> np.ndarray:
-    """Bool (N_I,): slim image pixels whose adapt image exceeds ``threshold`` × its maximum.
+def arc_pixels(
+    adapt_image: np.ndarray, threshold: float, floor: np.ndarray | None = None
+) -> np.ndarray:
+    """Bool (N_I,): slim image pixels whose adapt image exceeds ``threshold`` × its maximum
+    and, if given, ``floor`` (N_I,), the same units as the adapt image (data units).
 
     Raises ``ValueError`` for a threshold outside (0, 1) or an adapt image without a
     positive pixel.
@@ -33,7 +37,10 @@ def arc_pixels(adapt_image: np.ndarray, threshold: float) -> np.ndarray:
     peak = float(np.max(adapt_image))
     if not peak > 0.0:
         raise ValueError("the adapt image has no positive pixel: no arcs to support a source")
-    return adapt_image > threshold * peak
+    selected = adapt_image > threshold * peak
+    if floor is not None:
+        selected &= adapt_image > floor
+    return selected
 
 
 def reached_source_pixels(mapping: sparse.csr_matrix, image_pixels: np.ndarray) -> np.ndarray:
