@@ -158,6 +158,35 @@ def test_the_support_recovers_the_lens_light_and_the_evidence_prefers_it(lens):
         assert arcs.log_evidence > whole.log_evidence + 300
 
 
+def test_a_noise_floor_keeps_an_adapt_images_faint_pedestal_out_of_the_support(lens):
+    """An earlier source that took some smooth lens light leaves a faint pedestal (half the
+    noise) in the adapt image: at a threshold below it every pixel is an arc pixel, the
+    source may fill the mask and takes lens light beyond the ring; a 3 σ floor drops the
+    pedestal, keeps the arcs and leaves the lens light within 0.3 %, as the threshold
+    does on a clean adapt image."""
+    dataset = lens["dataset"]
+    x, y = dataset.pixel_centres
+    beyond = np.hypot(x, y) > 0.2
+    true_light = lens["lens_light"][beyond]
+    adapt = lens["lensed"] + 0.5 * NOISE
+    threshold = 0.25 * NOISE / adapt.max()
+    model = _model(lens, None)
+    errors = {}
+    for label, floor in (("threshold alone", None), ("floor", np.full(adapt.size, 3 * NOISE))):
+        arcs = arc_pixels(adapt, threshold, floor)
+        result = fit(
+            dataset,
+            dataclasses.replace(model, source=dataclasses.replace(model.source, arc_pixels=arcs)),
+        )
+        errors[label] = np.mean((result.lens_light_image[beyond] - true_light) / true_light)
+        if floor is None:
+            assert arcs.all()
+        else:
+            assert np.array_equal(arcs, lens["lensed"] > 2.5 * NOISE)
+    assert errors["threshold alone"] < -0.01
+    assert abs(errors["floor"]) < 0.003
+
+
 def test_a_support_no_source_pixel_reaches_is_rejected(lens):
     dataset = lens["dataset"]
     model = _model(lens, None)
