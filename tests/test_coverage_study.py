@@ -75,10 +75,9 @@ SAVED_1000 = ROOT / "docs" / "coverage" / "coverage_lenses_arcs_1000.csv"
 """Mocks of the arcs' study fitted again from SPix2 on with 1,000 source pixels, the 3.0″
 samples' value since 2026-12-05: three whose γ missed at 500 pixels (P32, P36, P37),
 one whose γ₂ missed (P30), one whose θ_E missed 1 % (P33) and five that held (P27,
-P28, P29, P31, P35); and P26 (γ and centre_y missed at 500), P25, P21 and P24 (held
-at 500) and the independent mocks L00 (held at 500, θ_E −1.5 %), L01 and L06 and P22, fitted
-whole at 1,000
-(docs/coverage.md,
+P28, P29, P31, P35); and P26 (γ and centre_y missed at 500), P22 (γ and the shear
+missed at 500), P25, P21 and P24 (held at 500) and the independent mocks L00 (held
+at 500, θ_E −1.5 %), L01 and L06, fitted whole at 1,000 (docs/coverage.md,
 "Compact clumps under 500 source pixels" and "The pixel count chosen by SPix2's
 evidence"). The first eleven were chosen by their 500-pixel outcome, so its fractions
 compare the two resolutions more than they measure a population's coverage."""

@@ -536,8 +536,8 @@ def phase_settings(wildcards) -> str:
     (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
     changing one phase's sampler reruns that phase (and the phases after it) only;
     `mass_source_pixels` goes to MASS only, `source_support`, `arc_noise_floor` and
-    `kmeans_seeding` (the k-means mesh's) to the phases from SPix2 on, and `lens_light_prior` to LIGHT
-    and MASS, likewise. An SPix2 candidate (`spix2_n<count>`) gets its own count as
+    `kmeans_seeding` (the k-means mesh's) to the phases from SPix2 on, and
+    `lens_light_prior` to LIGHT and MASS, likewise. An SPix2 candidate (`spix2_n<count>`) gets its own count as
     `source_pixels`."""
     light = lens_light_settings(wildcards.lens)
     section = {**config["slam"], **light}

@@ -536,6 +536,12 @@ class KMeansSourceModel:
             return None
         return hilbert_order(np.column_stack([self.pixel_x, self.pixel_y]))
 
+    @cached_property
+    def _arc_floor(self) -> np.ndarray | None:
+        """The arcs' noise floor in data units (k σ per slim pixel), once per model; None
+        without a floor."""
+        return self.arc_noise_floor * self.noise_map if self.arc_noise_floor > 0.0 else None
+
     def mesh_model(self, values: Mapping[str, float]) -> MeshSourceModel:
         """The k-means mesh of ``values`` with the adaptive split regularization."""
         x, y = self.centres(values)
@@ -549,7 +555,7 @@ class KMeansSourceModel:
             "kmeans",
             self.signals,
             values[ARC_THRESHOLD] if self.support == "arcs" else None,
-            self.arc_noise_floor * self.noise_map if self.arc_noise_floor > 0.0 else None,
+            self._arc_floor,
         )
 
     def fixed(self, values: Mapping[str, float]) -> "FixedSourceModel":
