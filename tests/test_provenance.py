@@ -30,11 +30,54 @@ def test_source_digest_follows_python_files_only(tmp_path):
     (package / "notes.txt").write_text("not code")
     assert source_digest(package) == before
     module = package / "priors.py"
-    module.write_text(module.read_text() + "\n# an edit\n")
+    module.write_text(module.read_text() + "\nEDITED = 1\n")
     edited = source_digest(package)
     assert edited != before
     module.rename(package / "renamed.py")
     assert source_digest(package) not in (before, edited)
+
+
+def test_docstrings_comments_and_layout_leave_the_digest_and_code_changes_it(tmp_path):
+    """A corrected docstring, a comment or a reflowed line does not make results stale;
+    a changed constant, operator or string that is not a docstring does."""
+    package = tmp_path / "pkg"
+    package.mkdir()
+    module = package / "model.py"
+    original = (
+        '"""Module docstring."""\n\n'
+        "SCALE = 2.0\n"
+        '"""Attribute docstring."""\n\n\n'
+        "def f(x):\n"
+        '    """Function docstring."""\n'
+        "    return SCALE * x  # a comment\n\n\n"
+        "class Model:\n"
+        '    """Only a docstring."""\n\n\n'
+        "def g():\n"
+        '    raise ValueError("a message")\n'
+    )
+
+    def digest(text):
+        module.write_text(text)
+        return source_digest(package)
+
+    before = digest(original)
+    for same in (
+        original.replace("Module docstring.", "Module docstring, corrected."),
+        original.replace("Attribute docstring.", "Other words."),
+        original.replace("Function docstring.", "The contract, in full."),
+        original.replace('    """Only a docstring."""\n', '    """Two."""\n    """Three."""\n'),
+        original.replace("  # a comment", "  # another comment"),
+        original.replace("return SCALE * x", "return (\n        SCALE\n        * x\n    )"),
+        "# a header comment\n\n" + original,
+    ):
+        assert digest(same) == before, same
+    for different in (
+        original.replace("SCALE = 2.0", "SCALE = 3.0"),
+        original.replace("SCALE * x", "SCALE + x"),
+        original.replace("a message", "another message"),
+        original.replace('    """Only a docstring."""\n', "    pass\n    pass\n"),
+    ):
+        assert digest(different) != before, different
 
 
 def test_a_command_is_keyed_on_the_modules_it_imports_and_no_others():
@@ -61,7 +104,7 @@ def test_editing_a_plotting_module_changes_the_figures_version_and_not_the_fits(
 
     def edit(relative):
         path = root / relative
-        path.write_text(path.read_text() + "\n# an edit\n")
+        path.write_text(path.read_text() + "\nEDITED = 1\n")
         return {command: command_digest(command, root) for command in ("phase", "summary")}
 
     after_plot = edit("plot/summary.py")

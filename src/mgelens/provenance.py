@@ -1,7 +1,9 @@
 """What code produced a result: the package version and a digest of its source.
 
 The version number changes only when it is bumped; the digest changes with any edit to
-the package's Python files. :func:`code_version` digests the whole package and is stored
+the code of the package's Python files, and not with an edit to their docstrings,
+comments or layout (:func:`code_form`): a corrected docstring does not make a sample's
+fits stale. :func:`code_version` digests the whole package and is stored
 in result files as provenance. :func:`command_version` digests only the files that one
 ``mgelens <command>`` runs (the command's module and every mgelens module it imports,
 found statically): each workflow rule is keyed on its command's version (``params:
@@ -22,12 +24,52 @@ PACKAGE_ROOT = Path(__file__).resolve().parent
 
 def source_digest(root: Path, files: list[Path] | None = None) -> str:
     """First 12 hex digits of the SHA-256 of ``files`` (default: every ``*.py`` file under
-    ``root``): each file's path relative to ``root`` and its bytes, in sorted path order."""
+    ``root``): each file's path relative to ``root`` and its :func:`code_form`, in sorted
+    path order."""
     digest = hashlib.sha256()
     for path in sorted(Path(root).rglob("*.py") if files is None else files):
         digest.update(Path(path).relative_to(root).as_posix().encode() + b"\0")
-        digest.update(Path(path).read_bytes())
+        digest.update(code_form(Path(path).read_bytes(), str(path)))
+        digest.update(b"\0")
     return digest.hexdigest()[:12]
+
+
+def code_form(source: bytes, filename: str = "<source>") -> bytes:
+    """What of a Python file's ``source`` can change what it computes: the dump of its
+    syntax tree without source positions and without the statements that are a bare
+    string (module, class, function and attribute docstrings), so that comments, layout
+    and docstrings drop out. Only ``__doc__`` changes with them, which the package reads
+    for command-line help alone."""
+    return _file_facts(source, filename)[1]
+
+
+@functools.cache
+def _file_facts(source: bytes, filename: str) -> tuple[tuple, bytes]:
+    """The import statements of ``source`` as (level, module, names) and its
+    :func:`code_form`, from one parse. Cached on the source's bytes: one snakemake start
+    digests a dozen commands whose closures share most files, and parsing is what
+    costs."""
+    tree = ast.parse(source, filename=filename)
+    imports = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imports.append((0, None, tuple(alias.name for alias in node.names)))
+        elif isinstance(node, ast.ImportFrom):
+            imports.append((node.level, node.module, tuple(alias.name for alias in node.names)))
+        for field in ("body", "orelse", "finalbody"):
+            body = getattr(node, field, None)
+            if isinstance(body, list) and body and isinstance(body[0], ast.stmt):
+                kept = [statement for statement in body if not _is_bare_string(statement)]
+                setattr(node, field, kept or [ast.Pass()])
+    return tuple(imports), ast.dump(tree, include_attributes=False).encode()
+
+
+def _is_bare_string(statement: ast.stmt) -> bool:
+    return (
+        isinstance(statement, ast.Expr)
+        and isinstance(statement.value, ast.Constant)
+        and isinstance(statement.value.value, str)
+    )
 
 
 def _module_file(root: Path, package: str, name: str) -> Path | None:
@@ -57,24 +99,21 @@ def _imported_names(path: Path, module: str, package: str) -> set[str]:
     return found
 
 
-@functools.cache
 def _import_targets(source: bytes, here: str, filename: str) -> frozenset[str]:
     """Every name that the import statements of ``source`` (a module whose package is
-    ``here``, read from ``filename``) name, relative imports resolved. Cached on the
-    source's bytes: one snakemake start digests a dozen commands whose closures share
-    most files, and parsing is what costs."""
+    ``here``, read from ``filename``) name, relative imports resolved."""
     names = set()
-    for node in ast.walk(ast.parse(source, filename=filename)):
-        if isinstance(node, ast.Import):
-            names.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                anchor = here.rsplit(".", node.level - 1)[0] if node.level > 1 else here
-                base = f"{anchor}.{node.module}" if node.module else anchor
-            else:
-                base = node.module or ""
-            names.add(base)
-            names.update(f"{base}.{alias.name}" for alias in node.names)
+    for level, module, imported in _file_facts(source, filename)[0]:
+        if module is None and level == 0:  # import a, b.c
+            names.update(imported)
+            continue
+        if level:
+            anchor = here.rsplit(".", level - 1)[0] if level > 1 else here
+            base = f"{anchor}.{module}" if module else anchor
+        else:
+            base = module
+        names.add(base)
+        names.update(f"{base}.{name}" for name in imported)
     return frozenset(names)
 
 
