@@ -6,6 +6,7 @@ is written into the repository.
 
 import functools
 import json
+import os
 import re
 import tomllib
 from pathlib import Path
@@ -793,6 +794,17 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     }  # fmt: skip
     assert set(table3["model"]) == {"nn_mge"}
     assert (tmp_path / "results" / "summary" / "lens_light_nn_mge.png").stat().st_size > 20_000
+
+    # the same data written again (new timestamp, same bytes) reruns nothing: Snakemake
+    # compares the checksums of inputs up to 1 MB (README, "Run it")
+    data = lens / "mock" / "data.fits"
+    content = data.read_bytes()
+    data.unlink()
+    data.write_bytes(content)
+    later = (lens / "mass" / "result.json").stat().st_mtime + 60.0
+    os.utime(data, (later, later))
+    again = snakemake("-n", f"--configfile={config}", workdir=tmp_path)
+    assert "Nothing to be done" in again.stdout + again.stderr, again.stdout + again.stderr
 
     (lens / "mass" / "result.json").unlink()
     target = "results/M1/mass/result.json"
