@@ -9,6 +9,7 @@ import pytest
 from mgelens import __version__
 from mgelens.provenance import (
     PACKAGE_ROOT,
+    code_form,
     code_version,
     command_digest,
     command_version,
@@ -78,6 +79,18 @@ def test_docstrings_comments_and_layout_leave_the_digest_and_code_changes_it(tmp
         original.replace('    """Only a docstring."""\n', "    pass\n    pass\n"),
     ):
         assert digest(different) != before, different
+
+
+def test_the_code_form_is_the_same_text_on_every_python_version():
+    """Written out field by field with empty fields left out, the form does not follow
+    ``ast.dump``'s changes between versions (``type_params`` added in 3.12, empty fields
+    dropped in 3.13): this text is what 3.11, 3.12 and 3.13 give."""
+    source = b'"""Doc."""\ndef f(x):\n    """Doc."""\n    return x + 1  # note\n'
+    assert code_form(source) == (
+        b"(Module body=[(FunctionDef args=(arguments args=[(arg arg='x')]) "
+        b"body=[(Return value=(BinOp left=(Name ctx=(Load) id='x') op=(Add) "
+        b"right=(Constant value=1)))] name='f')])"
+    )
 
 
 def test_a_command_is_keyed_on_the_modules_it_imports_and_no_others():
