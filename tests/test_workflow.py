@@ -796,10 +796,9 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert (tmp_path / "results" / "summary" / "lens_light_nn_mge.png").stat().st_size > 20_000
 
     # the same data written again (new timestamp, same bytes) reruns nothing: Snakemake
-    # compares the checksums of inputs up to 1 MB (README, "Run it")
+    # compares the checksums of inputs up to 1 MB (README, "Lens models: the SLaM chain")
     data = lens / "mock" / "data.fits"
     content = data.read_bytes()
-    data.unlink()
     time.sleep(1.0)  # newer than every result even on a file system of 1 s timestamps
     data.write_bytes(content)
     assert data.stat().st_mtime > (lens / "mass" / "result.json").stat().st_mtime

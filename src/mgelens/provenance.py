@@ -46,7 +46,8 @@ def code_form(source: bytes, filename: str = "<source>") -> bytes:
 
 @functools.cache
 def _file_facts(source: bytes, filename: str) -> tuple[tuple, bytes]:
-    """The import statements of ``source`` as (level, module, names) and its
+    """The import statements of ``source`` as (level, module, names), ``import a.b`` as
+    (0, "a.b", ()), and its
     :func:`code_form`, from one parse. Cached on the source's bytes: one snakemake start
     digests a dozen commands whose closures share most files, and parsing is what
     costs."""
@@ -54,7 +55,7 @@ def _file_facts(source: bytes, filename: str) -> tuple[tuple, bytes]:
     imports = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            imports.append((0, None, tuple(alias.name for alias in node.names)))
+            imports.extend((0, alias.name, ()) for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
             imports.append((node.level, node.module, tuple(alias.name for alias in node.names)))
         for field in ("body", "orelse", "finalbody"):
@@ -122,9 +123,6 @@ def _import_targets(source: bytes, here: str, filename: str) -> frozenset[str]:
     ``here``, read from ``filename``) name, relative imports resolved."""
     names = set()
     for level, module, imported in _file_facts(source, filename)[0]:
-        if module is None and level == 0:  # import a, b.c
-            names.update(imported)
-            continue
         if level:
             anchor = here.rsplit(".", level - 1)[0] if level > 1 else here
             base = f"{anchor}.{module}" if module else anchor

@@ -537,8 +537,8 @@ def phase_settings(wildcards) -> str:
     changing one phase's sampler reruns that phase (and the phases after it) only;
     `mass_source_pixels` goes to MASS only, `source_support`, `arc_noise_floor` and
     `kmeans_seeding` (the k-means mesh's) to the phases from SPix2 on, and
-    `lens_light_prior` to LIGHT and MASS, likewise. An SPix2 candidate (`spix2_n<count>`) gets its own count as
-    `source_pixels`."""
+    `lens_light_prior` to LIGHT and MASS, likewise. An SPix2 candidate (`spix2_n<count>`)
+    gets its own count as `source_pixels`."""
     light = lens_light_settings(wildcards.lens)
     section = {**config["slam"], **light}
     fit = {**(config["slam"].get("fit") or {}), **light.get("fit", {})}
