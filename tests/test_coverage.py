@@ -2,6 +2,7 @@
 targets on records with known answers, and the command's files."""
 
 import json
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -10,18 +11,24 @@ import pytest
 
 from mgelens.cli import main
 from mgelens.coverage import (
+    FITS_ALL,
+    FITS_UNFLAGGED,
     TARGETS,
     coverage_rows,
     coverage_table,
     interval_pulls,
     target_table,
+    targets_by_fits,
 )
 from mgelens.plot.coverage import (
     PULL_LIMIT,
     coverage_figure,
+    flagged_rows,
     pull_axis_limit,
     target_line,
+    target_text,
 )
+from mgelens.quality import NO_FLAG
 
 
 def entry(name, truth, median, one, three):
@@ -120,6 +127,27 @@ def test_targets_pass_and_fail_at_their_thresholds():
     assert (empty["passed"] == 0).all()
 
 
+def test_targets_over_unflagged_fits_leave_out_flagged_and_unknown_mocks():
+    """Five mocks: γ missed by P01 (flagged), P02 (no quality record) and P03 (unflagged).
+    Over all five, 2 of 5 inside 3σ; over the two unflagged mocks, P00 and P03, 1 of 2."""
+    rows = coverage_rows(records([0.0, 0.3, 0.3, 0.3, 0.0]))
+    flags = {"P00": NO_FLAG, "P01": "lensing", "P03": NO_FLAG, "P04": "singly imaged"}
+    rows["flags"] = rows["lens"].map(flags)
+    table = targets_by_fits(rows).set_index(["fits", "target"])
+    assert table.loc[(FITS_ALL, "γ inside 3σ"), ["passed", "n"]].tolist() == [2, 5]
+    assert table.loc[(FITS_UNFLAGGED, "γ inside 3σ"), ["passed", "n"]].tolist() == [1, 2]
+    assert len(table) == 2 * len(TARGETS)
+    np.testing.assert_array_equal(
+        flagged_rows(rows[rows["parameter"] == "mass.slope"]), [0, 1, 0, 0, 1]
+    )
+    text = target_text(targets_by_fits(rows))
+    assert "Fits that no quality check flags (2 mocks):" in text
+    assert text.count("γ inside 3σ") == 2
+    # without any quality record there is no unflagged block
+    assert set(targets_by_fits(rows.drop(columns="flags"))["fits"]) == {FITS_ALL}
+    assert set(targets_by_fits(rows.assign(flags=pd.NA))["fits"]) == {FITS_ALL}
+
+
 def test_records_without_one_sigma_intervals_leave_them_unknown():
     old = records([0.01])
     for row in old[0]["mass"]:
@@ -164,6 +192,44 @@ def test_command_writes_the_tables_and_the_figure(tmp_path):
     assert (out / "coverage.png").stat().st_size > 20_000
     figure = coverage_figure(rows, target_table(rows))
     assert "median chain 10 min" in figure.texts[0].get_text()
+
+
+def test_command_reads_the_quality_records_into_flags_and_targets(tmp_path, caplog):
+    """P01, whose γ misses, is flagged by the lensing check: the unflagged fits hold
+    every γ; a quality record of a lens without a recovery record is refused."""
+    paths, quality = [], []
+    for record in records([0.01, 0.3, -0.02]):
+        folder = tmp_path / record["lens"]
+        folder.mkdir()
+        (folder / "recovery.json").write_text(json.dumps(record))
+        paths.append(str(folder / "recovery.json"))
+        flagged = record["lens"] == "P01"
+        check = {
+            "lens": record["lens"],
+            "measured": True,
+            "flag": False,
+            "lensing": {"flag": flagged},
+            "multiplicity": {"flag": False},
+        }
+        (folder / "quality.json").write_text(json.dumps(check))
+        quality.append(str(folder / "quality.json"))
+    out = tmp_path / "summary"
+    outputs = ["--out", str(out / "coverage.csv"), "--rows", str(out / "rows.csv")]
+    outputs += ["--targets", str(out / "targets.csv"), "--figure", str(out / "coverage.png")]
+    assert main(["coverage", *paths, *outputs, "--quality", *quality]) == 0
+    rows = pd.read_csv(out / "rows.csv", keep_default_na=False)
+    assert rows.drop_duplicates("lens")["flags"].tolist() == [NO_FLAG, "lensing", NO_FLAG]
+    targets = pd.read_csv(out / "targets.csv").set_index(["fits", "target"])
+    assert targets.loc[(FITS_ALL, "γ inside 3σ"), "passed"] == 2
+    assert targets.loc[(FITS_UNFLAGGED, "γ inside 3σ"), ["passed", "n"]].tolist() == [2, 2]
+    assert targets.loc[(FITS_UNFLAGGED, "γ inside 3σ"), "met"]
+    stray = tmp_path / "stray.json"
+    stray.write_text(json.dumps(json.loads(Path(quality[0]).read_text()) | {"lens": "X9"}))
+    assert main(["coverage", *paths, *outputs, "--quality", str(stray)]) == 1
+    assert "lens 'X9' has no recovery record" in caplog.text
+    (tmp_path / "broken.json").write_text(json.dumps({"lens": "P00"}))
+    assert main(["coverage", *paths, *outputs, "--quality", str(tmp_path / "broken.json")]) == 1
+    assert "not a quality record" in caplog.text
 
 
 def test_the_figure_states_each_target_as_a_count_and_fits_its_pulls():

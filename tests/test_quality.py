@@ -302,9 +302,28 @@ def test_quality_command_writes_the_record(phase, capsys):
     assert multiplicity["multiply_imaged_fraction"] == pytest.approx(1.0)
     assert multiplicity["n_pixels"] > 100
     assert multiplicity["flag"] is False
+    assert quality.flagged_checks(record) == "residuals"
     out = capsys.readouterr().out
     assert "FLAG" in out
     assert "100% of the lensed source's signal" in out
+
+
+def test_flagged_checks_name_every_check_that_flags():
+    record = {
+        "measured": True,
+        "flag": False,
+        "lensing": {"flag": False},
+        "multiplicity": {"flag": False},
+    }
+    assert quality.flagged_checks(record) == quality.NO_FLAG
+    both = record | {"lensing": {"flag": True}, "multiplicity": {"flag": True}}
+    assert quality.flagged_checks(both) == "lensing; singly imaged"
+    # a residual statistic that was not measured flags nothing; records older than the
+    # multiplicity check have none
+    unmeasured = {"measured": False, "flag": True, "lensing": {"flag": False}}
+    assert quality.flagged_checks(unmeasured) == quality.NO_FLAG
+    with pytest.raises(KeyError):
+        quality.flagged_checks({"measured": True, "flag": False})
 
 
 def test_quality_command_takes_the_sky_noise_scale_for_a_small_circle(phase, capsys):

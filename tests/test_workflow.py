@@ -23,6 +23,7 @@ from workflow_run import CHAIN_TIMEOUT, ROOT, snakemake
 from mgelens import cli, mock_lenses
 from mgelens import simulate as sim
 from mgelens.pipeline.settings import PHASES, settings_from_mapping
+from mgelens.quality import NO_FLAG, flagged_checks
 from mgelens.recovery import true_mass_parameters
 from mgelens.sheet import read_sample_sheet
 
@@ -286,8 +287,10 @@ def test_coverage_config_fits_population_and_independent_mocks(tmp_path):
     assert result.returncode == 0, result.stderr
     output = result.stdout + result.stderr
     counts = job_counts(output)
-    assert counts["simulate_mock"] == counts["recovery"] == 50
+    assert counts["simulate_mock"] == counts["recovery"] == counts["fit_quality"] == 50
     assert counts["coverage"] == 1
+    # the study counts its targets again over the fits that no quality check flags
+    assert "--quality results/P00/quality.json" in output
     assert "mgelens simulate --independent-index 11 --population-seed 2024 --name L11 " in output
     assert "--image-size 201" in output
     slam = re.findall(r"--slam '([^']*)'", output)
@@ -766,6 +769,14 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert all(np.isfinite(row["total_error"]) for row in split)
     recovered = pd.read_csv(tmp_path / "results" / "summary" / "recovery.csv")
     assert list(recovered["lens"]) == ["M1"]
+    covered = pd.read_csv(
+        tmp_path / "results" / "summary" / "coverage_lenses.csv", keep_default_na=False
+    )
+    checks = flagged_checks(json.loads((lens / "quality.json").read_text()))
+    assert set(covered["flags"]) == {checks}
+    coverage_targets = pd.read_csv(tmp_path / "results" / "summary" / "coverage_targets.csv")
+    unflagged = coverage_targets[coverage_targets["fits"] == "unflagged"]
+    assert (unflagged["n"] == int(checks == NO_FLAG)).all()
     assert recovered["mass.slope.truth"].iloc[0] == pytest.approx(2.1)
     targets = pd.read_csv(tmp_path / "results" / "summary" / "recovery_targets.csv")
     light_ten, light_five, isophote_target = (row for _, row in targets.iterrows())

@@ -14,7 +14,9 @@ The input is one recovery record per mock (:func:`mgelens.recovery.recovery_summ
 
 Targets (:data:`TARGETS`): ≥ 95 % of the true γ, θ_E and shear components inside their
 3σ intervals; |median γ − truth| < 0.05 for ≥ 90 % of the mocks; θ_E within 1 % for
-≥ 95 %.
+≥ 95 %. :func:`targets_by_fits` counts them over every fit and, where the rows carry
+each mock's quality checks (column ``flags``, :func:`mgelens.quality.flagged_checks`),
+over the fits that no check flags: the ones a user would read as lens models.
 """
 
 from collections.abc import Mapping, Sequence
@@ -22,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+
+from mgelens.quality import NO_FLAG
 
 PARAMETERS = (
     "mass.centre_x",
@@ -220,3 +224,22 @@ def target_counts(passed: pd.Series, goal: float) -> dict:
         "goal": goal,
         "met": bool(len(passed)) and fraction >= goal,
     }
+
+
+FITS_ALL = "all"
+FITS_UNFLAGGED = "unflagged"
+"""Values of :func:`targets_by_fits`'s ``fits`` column."""
+
+
+def targets_by_fits(rows: pd.DataFrame, targets: Sequence[Target] = TARGETS) -> pd.DataFrame:
+    """:func:`target_table` over every row (``fits`` ``"all"``) and, when ``rows`` has a
+    ``flags`` column with at least one known value, again over the mocks whose ``flags``
+    is :data:`mgelens.quality.NO_FLAG` (``fits`` ``"unflagged"``). Mocks without a quality
+    record (``flags`` missing) count in ``"all"`` only."""
+    tables = [target_table(rows, targets).assign(fits=FITS_ALL)]
+    flags = rows.get("flags")
+    if flags is not None and flags.notna().any():
+        unflagged = rows[flags == NO_FLAG]
+        tables.append(target_table(unflagged, targets).assign(fits=FITS_UNFLAGGED))
+    table = pd.concat(tables, ignore_index=True)
+    return table[["fits", *[name for name in table.columns if name != "fits"]]]

@@ -516,3 +516,24 @@ def lensing_check(
             offset,
         )
     return LensingCheck(radius, False, "", offset)
+
+
+NO_FLAG = "none"
+"""What :func:`flagged_checks` gives for a record that no check flags."""
+
+
+def flagged_checks(record) -> str:
+    """The checks of a ``mgelens quality`` record (``quality.json``) that flag its fit, as
+    text: ``residuals`` (coherent residuals, when measured), ``lensing``
+    (:func:`lensing_check`) and ``singly imaged``
+    (:func:`mgelens.image_multiplicity.multiplicity_check`; records written before it
+    have none), joined by ``"; "``, or :data:`NO_FLAG`. Raises ``KeyError`` on a record
+    without the residual or lensing check."""
+    names = []
+    if record["measured"] and record["flag"]:
+        names.append("residuals")
+    if record["lensing"]["flag"]:
+        names.append("lensing")
+    if (record.get("multiplicity") or {}).get("flag"):
+        names.append("singly imaged")
+    return "; ".join(names) or NO_FLAG

@@ -166,7 +166,8 @@ rule recovery_table:
 
 rule coverage:
     input:
-        recovery_records,
+        records=recovery_records,
+        quality=mock_quality_records,
     output:
         table="results/summary/coverage.csv",
         rows="results/summary/coverage_lenses.csv",
@@ -189,8 +190,9 @@ rule coverage:
     conda:
         "../envs/mgelens.yaml"
     shell:
-        "mgelens coverage {input:q} --out {output.table:q} --rows {output.rows:q} "
-        "--targets {output.targets:q} --figure {output.figure:q} > {log:q} 2>&1"
+        "mgelens coverage {input.records:q} --quality {input.quality:q} "
+        "--out {output.table:q} --rows {output.rows:q} --targets {output.targets:q} "
+        "--figure {output.figure:q} > {log:q} 2>&1"
 
 
 rule chain_cost:

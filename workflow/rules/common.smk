@@ -311,6 +311,11 @@ def recovery_records(wildcards) -> list[str]:
     return [f"results/{lens}/recovery.json" for lens in LENSES.index[LENSES["kind"] == "mock"]]
 
 
+def mock_quality_records(wildcards) -> list[str]:
+    """Per-mock quality records (rule fit_quality), whose flags the coverage study reads."""
+    return [f"results/{lens}/quality.json" for lens in LENSES.index[LENSES["kind"] == "mock"]]
+
+
 SMOOTHNESS_MOCK = "M1"
 """The paper mock of the Appendix A scan (rule smoothness)."""
 SMOOTHNESS_LENSES = list(

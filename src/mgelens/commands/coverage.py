@@ -4,17 +4,22 @@ Example::
 
     mgelens coverage results/P*/recovery.json results/L*/recovery.json \\
         --out results/summary/coverage.csv --rows results/summary/coverage_lenses.csv \\
-        --targets results/summary/coverage_targets.csv --figure results/summary/coverage.png
+        --targets results/summary/coverage_targets.csv --figure results/summary/coverage.png \\
+        --quality results/P*/quality.json results/L*/quality.json
 
-Reads one recovery record per mock (``mgelens recovery``) and writes
+Reads one recovery record per mock (``mgelens recovery``) and, optionally, the mocks'
+quality records (``mgelens quality``, matched by their ``lens``), and writes
 
 * ``--out``: per mass parameter, the fractions of truths inside the 1σ and 3σ intervals,
   the bias and scatter of median − truth and the median |pull|;
 * ``--rows``: one row per mock and parameter, with the wall-clock seconds of the mock's
   SLaM chain (``chain_seconds``, :func:`mgelens.chain_cost.chain_seconds` of the record's
-  folder);
-* ``--targets``: each target's fraction, goal and whether it is met;
-* ``--figure``: the pulls per parameter, misses named, targets listed.
+  folder) and, with ``--quality``, the checks that flag its fit (``flags``,
+  :func:`mgelens.quality.flagged_checks`; empty for a mock without a quality record);
+* ``--targets``: each target's fraction, goal and whether it is met, over every fit
+  (``fits`` ``all``) and, with ``--quality``, over the fits no check flags (``unflagged``);
+* ``--figure``: the pulls per parameter, misses named, flagged fits drawn open, targets
+  listed.
 
 The exit code is 0 whether or not the targets are met (they are in ``--targets``).
 """
@@ -29,9 +34,10 @@ import numpy as np
 from mgelens.atomic import atomic_path
 from mgelens.chain_cost import chain_seconds
 from mgelens.commands import make_output_folders
-from mgelens.coverage import coverage_rows, coverage_table, target_table
+from mgelens.coverage import coverage_rows, coverage_table, targets_by_fits
 from mgelens.plot import save_png
 from mgelens.plot.coverage import coverage_figure
+from mgelens.quality import flagged_checks
 
 logger = logging.getLogger(__name__)
 
@@ -48,12 +54,39 @@ def register(subparsers) -> None:
     parser.add_argument("--rows", type=Path, required=True, help="per-mock rows (CSV)")
     parser.add_argument("--targets", type=Path, required=True, help="targets (CSV)")
     parser.add_argument("--figure", type=Path, required=True, help="pull figure (PNG)")
+    parser.add_argument(
+        "--quality",
+        type=Path,
+        nargs="+",
+        default=[],
+        metavar="QUALITY.json",
+        help="the mocks' quality records (mgelens quality), for the flags column and the "
+        "targets over unflagged fits",
+    )
     parser.set_defaults(func=run)
 
 
 def _write_csv(table, path: Path) -> None:
     with atomic_path(path) as temporary:
         table.to_csv(temporary, index=False)
+
+
+def _flags(paths: list[Path], lenses: set[str]) -> dict[str, str]:
+    """Lens → :func:`~mgelens.quality.flagged_checks` of its quality record; a record of a
+    lens without a recovery record, or a second record of one lens, is an error."""
+    flags = {}
+    for path in paths:
+        record = json.loads(path.read_text())
+        try:
+            lens, checks = record["lens"], flagged_checks(record)
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"{path}: not a quality record of mgelens quality (no {exc})") from exc
+        if lens not in lenses:
+            raise ValueError(f"{path}: lens {lens!r} has no recovery record among the inputs")
+        if lens in flags:
+            raise ValueError(f"{path}: a second quality record of lens {lens!r}")
+        flags[lens] = checks
+    return flags
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,8 +101,15 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError, KeyError) as exc:
         logger.error("cannot read the recovery records: %s", exc)
         return 1
+    try:
+        flags = _flags(args.quality, {record["lens"] for record in records})
+    except (OSError, ValueError, KeyError) as exc:
+        logger.error("cannot read the quality records: %s", exc)
+        return 1
     rows["chain_seconds"] = rows["lens"].map(seconds)
-    table, targets = coverage_table(rows), target_table(rows)
+    if args.quality:
+        rows["flags"] = rows["lens"].map(flags)
+    table, targets = coverage_table(rows), targets_by_fits(rows)
     _write_csv(table, args.out)
     _write_csv(rows, args.rows)
     _write_csv(targets, args.targets)

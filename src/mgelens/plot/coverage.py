@@ -1,13 +1,15 @@
 """Coverage figure (:mod:`mgelens.coverage`): where each mock's truth lies against its
 posterior intervals, per mass parameter, on a scale whose ±1 and ±3 are the 1σ and 3σ
 limits on the truth's side (:func:`~mgelens.coverage.interval_pulls`), mocks whose 3σ
-interval misses the truth in red and named, and the targets listed."""
+interval misses the truth in red and named, mocks whose fit a quality check flags drawn
+open, and the targets listed."""
 
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from mgelens.coverage import PARAMETERS, interval_pulls
+from mgelens.coverage import FITS_UNFLAGGED, PARAMETERS, interval_pulls
+from mgelens.quality import NO_FLAG
 
 PULL_LIMIT = 10.0
 """Pulls beyond ±this are drawn at the limit (with a triangle) so the bulk stays legible."""
@@ -44,24 +46,50 @@ def target_line(row) -> str:
     )
 
 
+def target_text(targets: pd.DataFrame) -> str:
+    """The targets of :func:`~mgelens.coverage.target_table` as lines of
+    :func:`target_line`; those of :func:`~mgelens.coverage.targets_by_fits` over the
+    unflagged fits under a heading of their own."""
+    fits = targets["fits"] if "fits" in targets else pd.Series("", index=targets.index)
+    lines = [target_line(row) for row in targets[fits != FITS_UNFLAGGED].itertuples()]
+    unflagged = targets[fits == FITS_UNFLAGGED]
+    if not unflagged.empty:
+        lines += ["", f"Fits that no quality check flags ({unflagged['n'].max()} mocks):"]
+        lines += [target_line(row) for row in unflagged.itertuples()]
+    return "\n".join(lines)
+
+
+def flagged_rows(rows: pd.DataFrame) -> np.ndarray:
+    """Whether a quality check flags each row's fit (column ``flags``; False where the
+    rows have no quality records)."""
+    flags = rows["flags"] if "flags" in rows else pd.Series(pd.NA, index=rows.index)
+    return (flags.notna() & (flags != NO_FLAG)).to_numpy(dtype=bool)
+
+
 def coverage_figure(rows: pd.DataFrame, targets: pd.DataFrame, title: str = "") -> Figure:
-    """Pulls per parameter (rows of :func:`~mgelens.coverage.coverage_rows`) and the
-    targets (:func:`~mgelens.coverage.target_table`) as text."""
+    """Pulls per parameter (rows of :func:`~mgelens.coverage.coverage_rows`, with their
+    quality ``flags`` if known) and the targets (:func:`~mgelens.coverage.target_table`
+    or :func:`~mgelens.coverage.targets_by_fits`) as text."""
     figure = Figure(figsize=(11.0, 5.5), layout="constrained")
     ax = figure.add_subplot()
     names = [name for name in PARAMETERS if (rows["parameter"] == name).any()]
     all_pulls = interval_pulls(rows)
+    all_flagged = flagged_rows(rows)
     rng = np.random.default_rng(0)
     for k, name in enumerate(names):
         of_name = (rows["parameter"] == name).to_numpy()
-        part, pulls = rows[of_name], all_pulls[of_name]
+        part, pulls, flagged = rows[of_name], all_pulls[of_name], all_flagged[of_name]
         shown = np.clip(pulls, -PULL_LIMIT, PULL_LIMIT)
         x = k + rng.uniform(-0.18, 0.18, len(part))
         missed = ~part["within_3sigma"].astype(bool).to_numpy()
         clipped = np.abs(pulls) > PULL_LIMIT
-        for mask, colour in ((~missed, "tab:blue"), (missed, "tab:red")):
-            ax.scatter(x[mask & ~clipped], shown[mask & ~clipped], s=14, color=colour)
-            ax.scatter(x[mask & clipped], shown[mask & clipped], s=30, marker="^", color=colour)
+        colours = np.where(missed, "tab:red", "tab:blue")
+        faces = np.where(flagged, "none", colours)
+        for shape, size, drawn in (("o", 14, ~clipped), ("^", 30, clipped)):
+            ax.scatter(
+                x[drawn], shown[drawn], s=size, marker=shape, facecolors=faces[drawn],
+                edgecolors=colours[drawn],
+            )  # fmt: skip
         stacked = {-1.0: 0, 1.0: 0}
         for xi, yi, lens, beyond in zip(
             x[missed], shown[missed], part["lens"][missed], clipped[missed], strict=True
@@ -88,9 +116,11 @@ def coverage_figure(rows: pd.DataFrame, targets: pd.DataFrame, title: str = "") 
     ax.set_ylabel(
         "median − truth, in the posterior's intervals\n(±1, ±3: its 1σ, 3σ limits toward the truth)"
     )
-    ax.set_xlabel("mass parameter (red: truth outside the 3σ interval)")
-    lines = [target_line(row) for row in targets.itertuples()]
-    ax.text(1.01, 1.0, "\n".join(lines), transform=ax.transAxes, va="top", fontsize="small")
+    legend = "red: truth outside the 3σ interval"
+    if all_flagged.any():
+        legend += "; open: a quality check flags the fit"
+    ax.set_xlabel(f"mass parameter ({legend})")
+    ax.text(1.01, 1.0, target_text(targets), transform=ax.transAxes, va="top", fontsize="small")
     lenses = rows["lens"].nunique()
     heading = f"Posterior coverage over {lenses} mock{'s' if lenses != 1 else ''}"
     seconds = rows.drop_duplicates("lens").get("chain_seconds")
