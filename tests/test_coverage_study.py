@@ -19,6 +19,7 @@ import pytest
 from workflow_run import ROOT
 
 from mgelens.coverage import PARAMETERS, ROW_COLUMNS, TARGETS, coverage_table, target_table
+from mgelens.quality import NO_FLAG
 
 SAVED = ROOT / "docs" / "coverage" / "coverage_lenses.csv"
 SAVED_ARCS = ROOT / "docs" / "coverage" / "coverage_lenses_arcs.csv"
@@ -95,10 +96,20 @@ MISSED_1000 = {
 }
 """Targets the 1,000-pixel rows do not meet."""
 
+MISSED_1000_UNFLAGGED = {
+    "|median γ − truth| < 0.05": "0.75 of 8: L00 −0.093, L02 +0.067",
+    "θ_E within 1 %": "0.875 of 8: L00 −1.73 %",
+}
+"""Targets the 1,000-pixel fits that no quality check flags do not meet. The saved rows
+carry ``flags`` (``mgelens quality`` on the chain's MASS result) for the mocks whose
+results were on the machine when the column was added (L00–L03, L06, P20, P22–P24)
+and the mocks fitted since; the others' are unknown and they are left out here."""
+
 STUDIES = {
     "paper model": (SAVED, MISSED),
     "arcs' support": (SAVED_ARCS, MISSED_ARCS),
     "1,000 source pixels": (SAVED_1000, MISSED_1000),
+    "1,000 source pixels, unflagged": (SAVED_1000, MISSED_1000_UNFLAGGED),
 }
 
 
@@ -109,13 +120,20 @@ def _saved(path) -> pd.DataFrame:
     return pd.read_csv(path)
 
 
+def _study_rows(study: str) -> pd.DataFrame:
+    """The saved rows of a study; those of the mocks no check flags for an "unflagged" one."""
+    rows = _saved(STUDIES[study][0])
+    return rows[rows["flags"] == NO_FLAG] if study.endswith("unflagged") else rows
+
+
 @pytest.fixture(scope="module", params=list(STUDIES))
 def rows(request) -> pd.DataFrame:
-    return _saved(STUDIES[request.param][0])
+    return _study_rows(request.param)
 
 
 def test_the_saved_rows_are_whole_mocks_of_the_study_sheet(rows):
-    assert list(rows.columns) == [*ROW_COLUMNS, "chain_seconds"]
+    assert list(rows.columns)[: len(ROW_COLUMNS) + 1] == [*ROW_COLUMNS, "chain_seconds"]
+    assert set(rows.columns[len(ROW_COLUMNS) + 1 :]) <= {"flags"}
     sheet = pd.read_csv(ROOT / "config" / "coverage.tsv", sep="\t", comment="#")
     assert set(rows["lens"]) <= set(sheet["lens"])
     for lens, part in rows.groupby("lens"):
@@ -162,5 +180,5 @@ def test_the_saved_fractions_are_those_of_its_rows(rows):
     ],
 )
 def test_the_saved_study_meets_the_target(study, target):
-    result = target_table(_saved(STUDIES[study][0]), [target]).iloc[0]
+    result = target_table(_study_rows(study), [target]).iloc[0]
     assert result["met"], f"{study}, {target.name}: {result['fraction']:.3f} of {result['n']} mocks"
