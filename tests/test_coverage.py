@@ -195,41 +195,55 @@ def test_command_writes_the_tables_and_the_figure(tmp_path):
 
 
 def test_command_reads_the_quality_records_into_flags_and_targets(tmp_path, caplog):
-    """P01, whose γ misses, is flagged by the lensing check: the unflagged fits hold
-    every γ; a quality record of a lens without a recovery record is refused."""
+    """P01, whose γ misses, is flagged by the lensing check and P02 has no quality record:
+    the unflagged fits, P00 and P03, hold every γ. A record of a lens without a recovery
+    record is left out with a warning; a second record of one lens and a broken file are
+    refused with the file named."""
     paths, quality = [], []
-    for record in records([0.01, 0.3, -0.02]):
+    for record in records([0.01, 0.3, 0.2, -0.02]):
         folder = tmp_path / record["lens"]
         folder.mkdir()
         (folder / "recovery.json").write_text(json.dumps(record))
         paths.append(str(folder / "recovery.json"))
-        flagged = record["lens"] == "P01"
         check = {
             "lens": record["lens"],
             "measured": True,
             "flag": False,
-            "lensing": {"flag": flagged},
+            "lensing": {"flag": record["lens"] == "P01"},
             "multiplicity": {"flag": False},
         }
-        (folder / "quality.json").write_text(json.dumps(check))
-        quality.append(str(folder / "quality.json"))
+        if record["lens"] != "P02":
+            (folder / "quality.json").write_text(json.dumps(check))
+            quality.append(str(folder / "quality.json"))
+    stray = tmp_path / "stray.json"
+    stray.write_text(json.dumps(json.loads(Path(quality[0]).read_text()) | {"lens": "X9"}))
     out = tmp_path / "summary"
     outputs = ["--out", str(out / "coverage.csv"), "--rows", str(out / "rows.csv")]
     outputs += ["--targets", str(out / "targets.csv"), "--figure", str(out / "coverage.png")]
-    assert main(["coverage", *paths, *outputs, "--quality", *quality]) == 0
-    rows = pd.read_csv(out / "rows.csv", keep_default_na=False)
-    assert rows.drop_duplicates("lens")["flags"].tolist() == [NO_FLAG, "lensing", NO_FLAG]
+    assert main(["coverage", *paths, *outputs, "--quality", *quality, str(stray)]) == 0
+    assert "lens 'X9' has no recovery record" in caplog.text
+    for read in ({}, {"keep_default_na": False}):  # a missing record: NaN, or "" as text
+        rows = pd.read_csv(out / "rows.csv", **read)
+        flags = rows.drop_duplicates("lens")["flags"].tolist()
+        assert flags[:2] + flags[3:] == [NO_FLAG, "lensing", NO_FLAG]
+        assert pd.isna(flags[2]) or flags[2] == ""
+        by_fits = targets_by_fits(rows).set_index(["fits", "target"])
+        assert by_fits.loc[(FITS_UNFLAGGED, "γ inside 3σ"), ["passed", "n"]].tolist() == [2, 2]
+        slope = rows[rows["parameter"] == "mass.slope"]
+        np.testing.assert_array_equal(flagged_rows(slope), [0, 1, 0, 0])
     targets = pd.read_csv(out / "targets.csv").set_index(["fits", "target"])
-    assert targets.loc[(FITS_ALL, "γ inside 3σ"), "passed"] == 2
+    assert targets.loc[(FITS_ALL, "γ inside 3σ"), ["passed", "n"]].tolist() == [2, 4]
     assert targets.loc[(FITS_UNFLAGGED, "γ inside 3σ"), ["passed", "n"]].tolist() == [2, 2]
     assert targets.loc[(FITS_UNFLAGGED, "γ inside 3σ"), "met"]
-    stray = tmp_path / "stray.json"
-    stray.write_text(json.dumps(json.loads(Path(quality[0]).read_text()) | {"lens": "X9"}))
-    assert main(["coverage", *paths, *outputs, "--quality", str(stray)]) == 1
-    assert "lens 'X9' has no recovery record" in caplog.text
-    (tmp_path / "broken.json").write_text(json.dumps({"lens": "P00"}))
-    assert main(["coverage", *paths, *outputs, "--quality", str(tmp_path / "broken.json")]) == 1
-    assert "not a quality record" in caplog.text
+    assert main(["coverage", *paths, *outputs, "--quality", quality[0], quality[0]]) == 1
+    assert f"{quality[0]}: a second quality record of lens 'P00'" in caplog.text
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"lens": "P00", ')
+    assert main(["coverage", *paths, *outputs, "--quality", str(broken)]) == 1
+    assert f"{broken}: Expecting" in caplog.text
+    broken.write_text(json.dumps({"lens": "P00"}))
+    assert main(["coverage", *paths, *outputs, "--quality", str(broken)]) == 1
+    assert f"{broken}: not a quality record" in caplog.text
 
 
 def test_the_figure_states_each_target_as_a_count_and_fits_its_pulls():

@@ -22,6 +22,7 @@ from workflow_run import CHAIN_TIMEOUT, ROOT, snakemake
 
 from mgelens import cli, mock_lenses
 from mgelens import simulate as sim
+from mgelens.coverage import TARGETS
 from mgelens.pipeline.settings import PHASES, settings_from_mapping
 from mgelens.quality import NO_FLAG, flagged_checks
 from mgelens.recovery import true_mass_parameters
@@ -776,6 +777,7 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     assert set(covered["flags"]) == {checks}
     coverage_targets = pd.read_csv(tmp_path / "results" / "summary" / "coverage_targets.csv")
     unflagged = coverage_targets[coverage_targets["fits"] == "unflagged"]
+    assert len(unflagged) == len(TARGETS)
     assert (unflagged["n"] == int(checks == NO_FLAG)).all()
     assert recovered["mass.slope.truth"].iloc[0] == pytest.approx(2.1)
     targets = pd.read_csv(tmp_path / "results" / "summary" / "recovery_targets.csv")

@@ -227,19 +227,29 @@ def target_counts(passed: pd.Series, goal: float) -> dict:
 
 
 FITS_ALL = "all"
+"""``fits`` of :func:`targets_by_fits`'s rows over every mock."""
 FITS_UNFLAGGED = "unflagged"
-"""Values of :func:`targets_by_fits`'s ``fits`` column."""
+"""``fits`` of :func:`targets_by_fits`'s rows over the mocks that no quality check flags."""
+
+
+def known_flags(rows: pd.DataFrame) -> pd.Series:
+    """The ``flags`` column of ``rows`` (:func:`mgelens.quality.flagged_checks`), missing
+    (NA) where a mock has no quality record: an absent column, a NaN or an empty text
+    (a CSV read with ``keep_default_na=False``) all count as unknown."""
+    flags = rows["flags"] if "flags" in rows else pd.Series(pd.NA, index=rows.index)
+    return flags.astype("string").replace("", pd.NA)
 
 
 def targets_by_fits(rows: pd.DataFrame, targets: Sequence[Target] = TARGETS) -> pd.DataFrame:
-    """:func:`target_table` over every row (``fits`` ``"all"``) and, when ``rows`` has a
-    ``flags`` column with at least one known value, again over the mocks whose ``flags``
-    is :data:`mgelens.quality.NO_FLAG` (``fits`` ``"unflagged"``). Mocks without a quality
-    record (``flags`` missing) count in ``"all"`` only."""
+    """:func:`target_table` over every row (``fits`` :data:`FITS_ALL`) and, when at least
+    one mock's flags are known (:func:`known_flags`), again over the mocks whose flags are
+    :data:`mgelens.quality.NO_FLAG` (``fits`` :data:`FITS_UNFLAGGED`). Mocks without a
+    quality record count in the first only; a fit whose residual statistic could not be
+    measured is unflagged if the other checks pass, as ``mgelens quality`` reports it."""
     tables = [target_table(rows, targets).assign(fits=FITS_ALL)]
-    flags = rows.get("flags")
-    if flags is not None and flags.notna().any():
-        unflagged = rows[flags == NO_FLAG]
+    flags = known_flags(rows)
+    if flags.notna().any():
+        unflagged = rows[(flags == NO_FLAG).fillna(False).to_numpy(dtype=bool)]
         tables.append(target_table(unflagged, targets).assign(fits=FITS_UNFLAGGED))
     table = pd.concat(tables, ignore_index=True)
     return table[["fits", *[name for name in table.columns if name != "fits"]]]

@@ -72,17 +72,25 @@ def _write_csv(table, path: Path) -> None:
 
 
 def _flags(paths: list[Path], lenses: set[str]) -> dict[str, str]:
-    """Lens → :func:`~mgelens.quality.flagged_checks` of its quality record; a record of a
-    lens without a recovery record, or a second record of one lens, is an error."""
+    """Lens → :func:`~mgelens.quality.flagged_checks` of its quality record. A record of a
+    lens without a recovery record is left out with a warning (a glob over a sample's
+    folders also finds its real lenses); an unreadable record, or a second one of a lens,
+    is an error naming the file."""
     flags = {}
     for path in paths:
-        record = json.loads(path.read_text())
         try:
+            record = json.loads(path.read_text())
             lens, checks = record["lens"], flagged_checks(record)
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{path}: {exc}") from exc
         except (KeyError, TypeError) as exc:
-            raise ValueError(f"{path}: not a quality record of mgelens quality (no {exc})") from exc
+            raise ValueError(
+                f"{path}: not a quality record of mgelens quality ({exc!r}); "
+                "write it again with mgelens quality"
+            ) from exc
         if lens not in lenses:
-            raise ValueError(f"{path}: lens {lens!r} has no recovery record among the inputs")
+            logger.warning("%s: lens %r has no recovery record among the inputs", path, lens)
+            continue
         if lens in flags:
             raise ValueError(f"{path}: a second quality record of lens {lens!r}")
         flags[lens] = checks

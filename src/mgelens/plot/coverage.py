@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from mgelens.coverage import FITS_UNFLAGGED, PARAMETERS, interval_pulls
+from mgelens.coverage import FITS_UNFLAGGED, PARAMETERS, interval_pulls, known_flags
 from mgelens.quality import NO_FLAG
 
 PULL_LIMIT = 10.0
@@ -60,10 +60,10 @@ def target_text(targets: pd.DataFrame) -> str:
 
 
 def flagged_rows(rows: pd.DataFrame) -> np.ndarray:
-    """Whether a quality check flags each row's fit (column ``flags``; False where the
-    rows have no quality records)."""
-    flags = rows["flags"] if "flags" in rows else pd.Series(pd.NA, index=rows.index)
-    return (flags.notna() & (flags != NO_FLAG)).to_numpy(dtype=bool)
+    """Whether a quality check flags each row's fit (:func:`~mgelens.coverage.known_flags`;
+    False where the mock has no quality record)."""
+    flags = known_flags(rows)
+    return (flags.notna() & (flags != NO_FLAG)).fillna(False).to_numpy(dtype=bool)
 
 
 def coverage_figure(rows: pd.DataFrame, targets: pd.DataFrame, title: str = "") -> Figure:
