@@ -65,6 +65,8 @@ def test_each_phase_sums_its_jobs_and_sp_counts_its_start(tmp_path):
     assert row["complete"]
     # jobs outside the chain (choose_light, simulate_mock) are not the chain's time
     assert chain_seconds(paths[0].parents[1]) == pytest.approx(100 + 40 + 50 + 60 + 61 + 200)
+    cpu = chain_seconds(paths[0].parents[1], "cpu_time")
+    assert cpu == pytest.approx(row["chain_cpu_min"] * 60)
     assert np.isnan(chain_seconds(tmp_path / "nothing"))
 
 
@@ -102,6 +104,8 @@ def test_an_unmeasured_or_missing_phase_makes_the_chain_incomplete(tmp_path):
     assert list(table["complete"]) == [True, False, False]
     assert np.isnan(table.loc[1, "sp_cpu_s"])
     assert np.isnan(table.loc[1, "chain_cpu_min"])
+    assert np.isnan(chain_seconds(unmeasured[0].parents[1], "cpu_time"))
+    assert chain_seconds(unmeasured[0].parents[1]) == pytest.approx(3 + 40 + 50 + 60 + 61 + 200)
     assert table.loc[1, "max_rss_mb"] == 500.0
     assert np.isnan(table.loc[2, "mass_cpu_s"])
     sample = sample_cost(table, cores=2)

@@ -186,12 +186,15 @@ def test_command_writes_the_tables_and_the_figure(tmp_path):
     assert table.set_index("parameter").loc["mass.slope", "within_3sigma"] == pytest.approx(2 / 3)
     rows = pd.read_csv(out / "rows.csv")
     assert (rows["chain_seconds"] == 600.0).all()
+    assert (rows["chain_cpu_seconds"] == 590.0).all()
     assert (
         not pd.read_csv(out / "targets.csv").set_index("parameter").loc["mass.slope", "met"].all()
     )
     assert (out / "coverage.png").stat().st_size > 20_000
     figure = coverage_figure(rows, target_table(rows))
-    assert "median chain 10 min" in figure.texts[0].get_text()
+    assert "median chain 10 CPU min" in figure.texts[0].get_text()  # 590 s
+    wall = coverage_figure(rows.drop(columns="chain_cpu_seconds"), target_table(rows))
+    assert "median chain 10 min" in wall.texts[0].get_text()  # 600 s on older rows
 
 
 def test_command_reads_the_quality_records_into_flags_and_targets(tmp_path, caplog):

@@ -150,13 +150,18 @@ def job_cost(benchmark: Path) -> JobCost:
     )
 
 
-def chain_seconds(lens_folder: Path) -> float:
-    """Wall-clock seconds of a lens's chain: the ``s`` column summed over every benchmark
-    file of a phase job in ``lens_folder/benchmarks/`` (other jobs left out); NaN with
-    none."""
+def chain_seconds(lens_folder: Path, column: str = "s") -> float:
+    """Seconds of a lens's chain: ``column`` of the benchmark files (``s``, wall-clock, or
+    ``cpu_time``) summed over every file of a phase job in ``lens_folder/benchmarks/``
+    (other jobs left out); NaN with none, or where one of them is NA (a job shorter than
+    Snakemake's first sample). A job resumed after an interruption counts its last run."""
     files = sorted(Path(lens_folder, "benchmarks").glob("*.tsv"))
-    seconds = [_benchmark(path, ("s",))["s"].sum() for path in files if phase_of(path.stem)]
-    return float(sum(seconds)) if seconds else np.nan
+    seconds = [
+        _benchmark(path, (column,))[column].sum(min_count=1)
+        for path in files
+        if phase_of(path.stem)
+    ]
+    return _total(seconds)
 
 
 COST_COLUMNS = (

@@ -12,9 +12,10 @@ quality records (``mgelens quality``, matched by their ``lens``), and writes
 
 * ``--out``: per mass parameter, the fractions of truths inside the 1σ and 3σ intervals,
   the bias and scatter of median − truth and the median |pull|;
-* ``--rows``: one row per mock and parameter, with the wall-clock seconds of the mock's
-  SLaM chain (``chain_seconds``, :func:`mgelens.chain_cost.chain_seconds` of the record's
-  folder) and, with ``--quality``, the checks that flag its fit (``flags``,
+* ``--rows``: one row per mock and parameter, with the wall-clock and CPU seconds of the
+  mock's SLaM chain (``chain_seconds``, ``chain_cpu_seconds``:
+  :func:`mgelens.chain_cost.chain_seconds` of the record's folder) and, with
+  ``--quality``, the checks that flag its fit (``flags``,
   :func:`mgelens.quality.flagged_checks`; empty for a mock without a quality record);
 * ``--targets``: each target's fraction, goal and whether it is met, over every fit
   (``fits`` ``all``) and, with ``--quality``, over the fits no check flags (``unflagged``);
@@ -102,10 +103,11 @@ def run(args: argparse.Namespace) -> int:
         make_output_folders(args.out, args.rows, args.targets, args.figure)
         records = [json.loads(path.read_text()) for path in args.records]
         rows = coverage_rows(records)
-        seconds = {
-            record["lens"]: chain_seconds(path.parent)
-            for record, path in zip(records, args.records, strict=True)
+        folders = {
+            record["lens"]: path.parent for record, path in zip(records, args.records, strict=True)
         }
+        seconds = {lens: chain_seconds(folder) for lens, folder in folders.items()}
+        cpu = {lens: chain_seconds(folder, "cpu_time") for lens, folder in folders.items()}
     except (OSError, ValueError, KeyError) as exc:
         logger.error("cannot read the recovery records: %s", exc)
         return 1
@@ -115,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
         logger.error("cannot read the quality records: %s", exc)
         return 1
     rows["chain_seconds"] = rows["lens"].map(seconds)
+    rows["chain_cpu_seconds"] = rows["lens"].map(cpu)
     if args.quality:
         rows["flags"] = rows["lens"].map(flags)
     table, targets = coverage_table(rows), targets_by_fits(rows)
@@ -124,10 +127,11 @@ def run(args: argparse.Namespace) -> int:
     save_png(coverage_figure(rows, targets), args.figure)
     print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print(targets.to_string(index=False))
-    times = np.array(list(seconds.values()), dtype=float)
-    if np.isfinite(times).any():
-        print(
-            f"chain wall-clock per mock: median {np.nanmedian(times) / 60:.1f} min, "
-            f"range {np.nanmin(times) / 60:.1f}–{np.nanmax(times) / 60:.1f} min"
-        )
+    for name, per_lens in (("wall-clock", seconds), ("CPU", cpu)):
+        times = np.array(list(per_lens.values()), dtype=float)
+        if np.isfinite(times).any():
+            print(
+                f"chain {name} per mock: median {np.nanmedian(times) / 60:.1f} min, "
+                f"range {np.nanmin(times) / 60:.1f}–{np.nanmax(times) / 60:.1f} min"
+            )
     return 0

@@ -66,6 +66,17 @@ def flagged_rows(rows: pd.DataFrame) -> np.ndarray:
     return (flags.notna() & (flags != NO_FLAG)).fillna(False).to_numpy(dtype=bool)
 
 
+def chain_time_text(mocks: pd.DataFrame) -> str:
+    """ " (median chain N CPU min)" over one row per mock, from ``chain_cpu_seconds`` where
+    any is known (the cost on a shared host), else " (median chain N min)" of the
+    wall-clock ``chain_seconds``; "" without either."""
+    for column, unit in (("chain_cpu_seconds", "CPU min"), ("chain_seconds", "min")):
+        seconds = mocks[column].to_numpy(dtype=float) if column in mocks else np.array([])
+        if np.isfinite(seconds).any():
+            return f" (median chain {np.nanmedian(seconds) / 60:.0f} {unit})"
+    return ""
+
+
 def coverage_figure(rows: pd.DataFrame, targets: pd.DataFrame, title: str = "") -> Figure:
     """Pulls per parameter (rows of :func:`~mgelens.coverage.coverage_rows`, with their
     quality ``flags`` if known) and the targets (:func:`~mgelens.coverage.target_table`
@@ -123,8 +134,6 @@ def coverage_figure(rows: pd.DataFrame, targets: pd.DataFrame, title: str = "") 
     ax.text(1.01, 1.0, target_text(targets), transform=ax.transAxes, va="top", fontsize="small")
     lenses = rows["lens"].nunique()
     heading = f"Posterior coverage over {lenses} mock{'s' if lenses != 1 else ''}"
-    seconds = rows.drop_duplicates("lens").get("chain_seconds")
-    if seconds is not None and np.isfinite(seconds.to_numpy(dtype=float)).any():
-        heading += f" (median chain {np.nanmedian(seconds.to_numpy(dtype=float)) / 60:.0f} min)"
+    heading += chain_time_text(rows.drop_duplicates("lens"))
     figure.suptitle(title or heading)
     return figure
