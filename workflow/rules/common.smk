@@ -306,14 +306,18 @@ def chain_cost_inputs(wildcards) -> list[str]:
     return files
 
 
+MOCK_LENS_IDS = list(LENSES.index[LENSES["kind"] == "mock"])
+"""The sheet's mock lenses, in sheet order."""
+
+
 def recovery_records(wildcards) -> list[str]:
     """Per-mock recovery records gathered into results/summary/recovery.csv."""
-    return [f"results/{lens}/recovery.json" for lens in LENSES.index[LENSES["kind"] == "mock"]]
+    return [f"results/{lens}/recovery.json" for lens in MOCK_LENS_IDS]
 
 
 def mock_quality_records(wildcards) -> list[str]:
     """Per-mock quality records (rule fit_quality), whose flags the coverage study reads."""
-    return [f"results/{lens}/quality.json" for lens in LENSES.index[LENSES["kind"] == "mock"]]
+    return [f"results/{lens}/quality.json" for lens in MOCK_LENS_IDS]
 
 
 SMOOTHNESS_MOCK = "M1"
