@@ -301,6 +301,19 @@ def test_arcs_support_adds_spix2s_arc_threshold_and_later_phases_keep_it(chain):
         {**spix2.max_likelihood, models.ARC_THRESHOLD: 0.05}
     )
     assert held.source.support_mass == models.mass_profiles(spix2.max_likelihood)
+    assert held.source.signals_mass is None
+    assert "adaptive_signals_mass" not in held.describe()
+    signals_held = models.KMeansSourceModel(
+        x.ravel(), y.ravel(), adapt, 40, signals_mass="spix2"
+    ).fixed(spix2.max_likelihood)
+    assert signals_held.source.signals_mass == models.mass_profiles(spix2.max_likelihood)
+    assert signals_held.describe()["adaptive_signals_mass"] == "spix2"
+    assert (
+        "adaptive_signals_mass"
+        not in models.KMeansSourceModel(
+            x.ravel(), y.ravel(), adapt, 40, signals_mass="spix2"
+        ).describe()
+    )
 
 
 SERSIC_VALUES = {
@@ -1234,6 +1247,19 @@ def test_light_warm_start_is_the_union_of_seeded_prior_draws(sersic_run, mock_di
     sets.clear()
     run.reference_passive_set(mass_phase.problem(mock_dir, sersic_run, settings, LENS))
     assert len(sets) == 1
+
+
+def test_quick_mass_holds_the_adaptive_signals_at_spix2s_mass(sersic_run, mock_dir):
+    """The quick profile's MASS traces its adaptive signals through SPix2's mass
+    (``adaptive_signals_mass: spix2``), the paper's through each sampled mass."""
+    assert profile_settings("quick").adaptive_signals_mass == "spix2"
+    assert profile_settings("paper").adaptive_signals_mass == "fitted"
+    spix2 = json.loads((sersic_run / "spix2" / "result.json").read_text())["max_likelihood"]
+    for choice, held in (("spix2", models.mass_profiles(spix2)), ("fitted", None)):
+        settings = sersic_settings(adaptive_signals_mass=choice)
+        model = mass_phase.problem(mock_dir, sersic_run, settings, LENS).model
+        assert model.source.source.signals_mass == held
+        assert ("adaptive_signals_mass" in model.describe()["source"]) == (held is not None)
 
 
 def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, mock_dir):

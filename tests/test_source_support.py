@@ -245,3 +245,37 @@ def test_a_held_support_keeps_the_solved_pixels_of_its_mass(lens):
     assert not np.array_equal(following.source.support, at_held.source.support)
     assert at_moved.log_evidence != pytest.approx(following.log_evidence)
     assert np.all(at_moved.source.fluxes[~at_held.source.support] == 0.0)
+
+
+def test_held_adaptive_signals_are_those_of_their_mass_at_any_fitted_mass(lens):
+    """``signals_mass`` (``slam.adaptive_signals_mass: spix2``): at the held mass the fit is
+    the unheld one; at another mass H is the split matrix of the new mesh weighted by the
+    signals of the held mass's trace (built here by hand), not the new trace's."""
+    from mgelens.source.regularization import (
+        AdaptiveBrightnessSplit,
+        adaptive_pixel_signals,
+        adaptive_weights,
+        split_matrix,
+    )
+
+    dataset = lens["dataset"]
+    regularization = AdaptiveBrightnessSplit(0.5, 3.0, 0.6, signals="weighted")
+    free = PixelizedSource(*lens["centres"], regularization, adapt_image=lens["lensed"])
+    held = dataclasses.replace(free, signals_mass=MASS)
+    model = LensModel(mass=MASS, lens_light=lens["sets"], source=held)
+    at_mass = fit(dataset, model)
+    assert at_mass.log_evidence == pytest.approx(
+        fit(dataset, dataclasses.replace(model, source=free)).log_evidence, rel=1e-12
+    )
+    moved = (SIE((0.02, -0.01), 1.13, 0.76, 43.0), ExternalShear(0.03, -0.02))
+    at_moved = fit(dataset, dataclasses.replace(model, mass=moved))
+    following = fit(dataset, dataclasses.replace(model, mass=moved, source=free))
+    signals = adaptive_pixel_signals(
+        pixelized_operator(dataset, MASS, free).weights, lens["lensed"], 0.6, "weighted"
+    )
+    mesh = pixelized_operator(dataset, moved, free).mesh
+    expected = split_matrix(mesh, adaptive_weights(signals, 0.5, 3.0) ** 2)
+    held_h = at_moved.source.regularization_matrix
+    assert abs(held_h - expected).max() <= 1e-12 * abs(expected).max()
+    assert abs(following.source.regularization_matrix - expected).max() > 1e-3 * abs(expected).max()
+    assert at_moved.log_evidence != pytest.approx(following.log_evidence, rel=1e-9)

@@ -73,6 +73,7 @@ class FitDataset:
     _columns_cache: dict = field(default_factory=dict, repr=False)
     _source_cache: dict = field(default_factory=dict, repr=False)
     _support_cache: dict = field(default_factory=dict, repr=False)
+    _signals_cache: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def from_imaging(
@@ -134,6 +135,7 @@ class FitDataset:
             _columns_cache={},
             _source_cache={},
             _support_cache={},
+            _signals_cache={},
         )
 
     @cached_property
@@ -219,11 +221,23 @@ class FitDataset:
         arc pixels reach when traced through that mass, computed once per source object."""
         cache = self._support_cache
         if cache.get("source") is not source:
-            traced = replace(source, support_mass=None)
+            traced = replace(source, support_mass=None, signals_mass=None)
             support = pixelized_operator(self, source.support_mass, traced).support
             cache.clear()
             cache.update(source=source, support=support)
         return cache["support"]
+
+    def held_signal_weights(self, source: "PixelizedSource") -> SourceWeights:
+        """The interpolation weights of ``source``'s sub-pixels traced through its
+        ``signals_mass``, from which an adaptive regularization reads its pixel signals,
+        computed once per source object."""
+        cache = self._signals_cache
+        if cache.get("source") is not source:
+            traced = replace(source, support_mass=None, signals_mass=None)
+            weights = pixelized_operator(self, source.signals_mass, traced).weights
+            cache.clear()
+            cache.update(source=source, weights=weights)
+        return cache["weights"]
 
     def repeated_source(self, mass, source: "PixelizedSource") -> "SourceSystem | None":
         """The source's fixed part of the linear system if the previous fit had the same
@@ -274,6 +288,12 @@ class PixelizedSource:
         for every fit of this source (LIGHT and MASS hold SPix2's), so that the solved
         pixels do not change with the fitted mass and the evidence stays continuous in
         it. ``None``: the fitted mass's own trace.
+    signals_mass : tuple or None
+        Mass profiles through which the sub-pixels are traced to compute an adaptive
+        regularization's pixel signals S_j (SPEC §5.2), held for every fit of this source
+        (``slam.adaptive_signals_mass: spix2``: LIGHT and MASS hold SPix2's), so that the
+        source's prior, and with it ln det H, does not change with the fitted mass.
+        ``None`` (anchor): the fitted mass's own trace.
     """
 
     image_plane_x: np.ndarray
@@ -283,6 +303,7 @@ class PixelizedSource:
     adapt_image: np.ndarray | None = None
     arc_pixels: np.ndarray | None = None
     support_mass: tuple | None = None
+    signals_mass: tuple | None = None
 
     def __post_init__(self):
         if self.interpolation not in INTERPOLATIONS:
@@ -545,7 +566,8 @@ def pixelized_operator(dataset: FitDataset, mass, source: PixelizedSource) -> So
     )
     indptr, indices, values = interpolate(mesh, bx, by)
     weights = SourceWeights(indptr, indices, values, dataset.settings.sub_size, mesh.n_points)
-    h = source.regularization.matrix(mesh, weights, source.adapt_image)
+    signal_weights = weights if source.signals_mass is None else dataset.held_signal_weights(source)
+    h = source.regularization.matrix(mesh, signal_weights, source.adapt_image)
     mapping = mapping_matrix(weights)
     if source.arc_pixels is None:
         return SourceOperator(mesh, weights, mapping, h, dataset.source_psf_operator)

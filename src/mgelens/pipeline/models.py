@@ -456,6 +456,9 @@ class KMeansSourceModel:
         times its noise (0: no floor; needs ``noise_map``).
     noise_map : ndarray or None
         Slim (N_I,) noise map σ (data units), for the arcs' noise floor.
+    signals_mass : {"fitted", "spix2"}
+        ``SlamSettings.adaptive_signals_mass``: with ``spix2`` the :meth:`fixed` source
+        holds its adaptive signals at the mass it is fixed at.
     """
 
     pixel_x: np.ndarray
@@ -471,6 +474,7 @@ class KMeansSourceModel:
     seeding: str = "kmeans++"
     arc_noise_floor: float = 0.0
     noise_map: np.ndarray | None = None
+    signals_mass: str = "fitted"
 
     def __post_init__(self):
         if self.arc_noise_floor > 0.0 and (self.support != "arcs" or self.noise_map is None):
@@ -490,8 +494,8 @@ class KMeansSourceModel:
         noise_map: np.ndarray | None = None,
     ) -> "KMeansSourceModel":
         """The k-means source of ``n_pixels`` pixels on these pixels and adapt image, with
-        the seed, scheme, interpolation, cross offset, adaptive signals, support, seeding
-        and arcs' noise floor of ``settings``
+        the seed, scheme, interpolation, cross offset, adaptive signals, support, seeding,
+        arcs' noise floor and adaptive signals' mass of ``settings``
         (:class:`~mgelens.pipeline.settings.SlamSettings`); ``noise_map`` (slim σ) is
         needed for a noise floor."""
         return cls(
@@ -508,6 +512,7 @@ class KMeansSourceModel:
             settings.kmeans_seeding,
             settings.arc_noise_floor,
             noise_map,
+            settings.adaptive_signals_mass,
         )
 
     def centres(self, values: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -560,12 +565,17 @@ class KMeansSourceModel:
 
     def fixed(self, values: Mapping[str, float]) -> "FixedSourceModel":
         """Mesh and regularization of ``values`` frozen (LIGHT and MASS keep SPix2's
-        source); an arcs' support is held at the mass of ``values`` (SPix2's), whatever
-        mass the phase samples."""
+        source); an arcs' support, and with ``signals_mass`` ``spix2`` the adaptive
+        signals, are held at the mass of ``values`` (SPix2's), whatever mass the phase
+        samples."""
         source = self.mesh_model(values).build(values)
         if source.arc_pixels is not None:
             source = replace(source, support_mass=mass_profiles(values))
-        return FixedSourceModel(source, {**self.describe(), "fixed": True})
+        description = {**self.describe(), "fixed": True}
+        if self.signals_mass == "spix2":
+            source = replace(source, signals_mass=mass_profiles(values))
+            description["adaptive_signals_mass"] = "spix2"
+        return FixedSourceModel(source, description)
 
     def build(self, values: Mapping[str, float]) -> PixelizedSource:
         return self.mesh_model(values).build(values)

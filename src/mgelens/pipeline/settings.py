@@ -12,7 +12,9 @@ Two profiles give the defaults (:data:`PROFILES`):
   default sample (M1–M3) on two cores. Its source mesh follows the continuous edge rule
   (``edge_rule: continuous``, hull pixels solved, weighted adaptive signals), under
   which the log evidence is a continuous function of the mass: with the anchor's rules
-  M2's MASS maximum sat on a spike 36 above the smooth trend of ln ε around it. The MGE
+  M2's MASS maximum sat on a spike 36 above the smooth trend of ln ε around it. MASS
+  holds the adaptive signals at SPix2's mass (``adaptive_signals_mass: spix2``), so that
+  the source's prior does not act as a prior on the mass. The MGE
   itself is not simplified (30 Gaussians per set, SPEC §2.4).
 
 A YAML file may override any field under a top-level ``slam:`` key; other top-level keys
@@ -45,7 +47,12 @@ import yaml
 from mgelens import values
 from mgelens.fit_settings import FitSettings
 from mgelens.search.sampler_settings import SamplerSettings
-from mgelens.source.schemes import INTERPOLATIONS, KMEANS_SEEDINGS, SIGNAL_AVERAGES
+from mgelens.source.schemes import (
+    INTERPOLATIONS,
+    KMEANS_SEEDINGS,
+    SIGNAL_AVERAGES,
+    SIGNAL_MASSES,
+)
 
 PHASES = ("sp", "spix1", "spix2", "light", "mass")
 """Phase names in chain order; each is also the name of the phase's result folder."""
@@ -154,6 +161,16 @@ class SlamSettings:
         sub-pixel count (SPEC §5.2, anchor) or weighted by the interpolation weights, which
         is continuous as the mesh moves
         (:func:`mgelens.source.regularization.adaptive_pixel_signals`).
+    adaptive_signals_mass : {"fitted", "spix2"}
+        The mass through which LIGHT's and MASS's fixed source (SPix2's mesh and
+        hyper-parameters) traces the adapt image into its pixel signals S_j: every fitted
+        mass's own (``fitted``, the anchor's and the paper profile's), or SPix2's, held
+        for the whole phase (``spix2``, the quick profile's). With ``fitted`` the
+        source's prior changes with the mass MASS samples, and its ln det H term then
+        acts as a prior on the mass: one source pixel's signal sets the normalisation
+        max_j S_j, and a shift of a few per cent in it moves ln det H by hundreds
+        (docs/coverage.md, "The adaptive signals as a mass prior"). LIGHT's mass is
+        SPix2's, so only MASS differs.
     prior_passing : {"paper", "2024"}
         Prior-passing rule (SPEC §8.2).
     sp_start : {"prior", "search"}
@@ -224,6 +241,7 @@ class SlamSettings:
     interpolation: str = "natural_neighbour"
     cross_offset: str = "anchor"
     adaptive_signals: str = "anchor"
+    adaptive_signals_mass: str = "fitted"
     prior_passing: str = "paper"
     sp_start: str = "prior"
     spix1_rescan: bool = False
@@ -323,6 +341,7 @@ _CHOICES = {
     "interpolation": INTERPOLATIONS,
     "cross_offset": CROSS_OFFSETS,
     "adaptive_signals": SIGNAL_AVERAGES,
+    "adaptive_signals_mass": SIGNAL_MASSES,
     "prior_passing": PRIOR_PASSING_RULES,
     "sp_start": SP_STARTS,
     "sp_mass_centre": SP_MASS_CENTRES,
@@ -500,6 +519,7 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
             profile="quick",
             positions_penalty=True,
             adaptive_signals="weighted",
+            adaptive_signals_mass="spix2",
             sp_start="search",
             spix1_rescan=True,
             source_support="arcs",

@@ -13,6 +13,10 @@ SIGNAL_AVERAGES = ("anchor", "weighted")
 """How a source pixel's signal averages the adapt image over the sub-pixels it serves
 (:func:`mgelens.source.regularization.adaptive_pixel_signals`)."""
 
+SIGNAL_MASSES = ("fitted", "spix2")
+"""The mass through which a fixed source's adaptive signals are traced: each fitted mass's
+own (anchor) or SPix2's, held (:attr:`mgelens.fit.PixelizedSource.signals_mass`)."""
+
 KMEANS_SEEDINGS = ("kmeans++", "systematic")
 """Initial centres of the k-means source mesh: the anchor's k-means++ or the systematic
 (stratified) draw along a Hilbert curve (:func:`mgelens.source.image_mesh.kmeans_centres`)."""
