@@ -219,25 +219,23 @@ class FitDataset:
     def held_support(self, source: "PixelizedSource") -> np.ndarray:
         """The support of a source whose ``support_mass`` holds it: the mesh points its
         arc pixels reach when traced through that mass, computed once per source object."""
-        cache = self._support_cache
-        if cache.get("source") is not source:
-            traced = replace(source, support_mass=None, signals_mass=None)
-            support = pixelized_operator(self, source.support_mass, traced).support
-            cache.clear()
-            cache.update(source=source, support=support)
-        return cache["support"]
+        return self._held_operator(source, source.support_mass, self._support_cache).support
 
     def held_signal_weights(self, source: "PixelizedSource") -> SourceWeights:
         """The interpolation weights of ``source``'s sub-pixels traced through its
         ``signals_mass``, from which an adaptive regularization reads its pixel signals,
         computed once per source object."""
-        cache = self._signals_cache
+        return self._held_operator(source, source.signals_mass, self._signals_cache).weights
+
+    def _held_operator(self, source: "PixelizedSource", mass, cache: dict) -> "SourceOperator":
+        """``source`` traced through ``mass`` with nothing held, kept in ``cache`` for as
+        long as the same source object asks."""
         if cache.get("source") is not source:
             traced = replace(source, support_mass=None, signals_mass=None)
-            weights = pixelized_operator(self, source.signals_mass, traced).weights
+            operator = pixelized_operator(self, mass, traced)
             cache.clear()
-            cache.update(source=source, weights=weights)
-        return cache["weights"]
+            cache.update(source=source, operator=operator)
+        return cache["operator"]
 
     def repeated_source(self, mass, source: "PixelizedSource") -> "SourceSystem | None":
         """The source's fixed part of the linear system if the previous fit had the same
