@@ -72,8 +72,7 @@ class FitDataset:
     border: np.ndarray
     _columns_cache: dict = field(default_factory=dict, repr=False)
     _source_cache: dict = field(default_factory=dict, repr=False)
-    _support_cache: dict = field(default_factory=dict, repr=False)
-    _signals_cache: dict = field(default_factory=dict, repr=False)
+    _held_cache: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def from_imaging(
@@ -134,8 +133,7 @@ class FitDataset:
             settings=replace(self.settings, positive_only=True),
             _columns_cache={},
             _source_cache={},
-            _support_cache={},
-            _signals_cache={},
+            _held_cache={},
         )
 
     @cached_property
@@ -219,23 +217,27 @@ class FitDataset:
     def held_support(self, source: "PixelizedSource") -> np.ndarray:
         """The support of a source whose ``support_mass`` holds it: the mesh points its
         arc pixels reach when traced through that mass, computed once per source object."""
-        return self._held_operator(source, source.support_mass, self._support_cache).support
+        return self._held_operator(source, source.support_mass).support
 
     def held_signal_weights(self, source: "PixelizedSource") -> SourceWeights:
         """The interpolation weights of ``source``'s sub-pixels traced through its
         ``signals_mass``, from which an adaptive regularization reads its pixel signals,
         computed once per source object."""
-        return self._held_operator(source, source.signals_mass, self._signals_cache).weights
+        return self._held_operator(source, source.signals_mass).weights
 
-    def _held_operator(self, source: "PixelizedSource", mass, cache: dict) -> "SourceOperator":
-        """``source`` traced through ``mass`` with nothing held, kept in ``cache`` for as
-        long as the same source object asks."""
+    def _held_operator(self, source: "PixelizedSource", mass) -> "SourceOperator":
+        """``source`` traced through ``mass`` with nothing held, kept for as long as the
+        same source object asks (its support and its signals, both held at SPix2's mass,
+        share one trace)."""
+        cache = self._held_cache
         if cache.get("source") is not source:
-            traced = replace(source, support_mass=None, signals_mass=None)
-            operator = pixelized_operator(self, mass, traced)
             cache.clear()
-            cache.update(source=source, operator=operator)
-        return cache["operator"]
+            cache.update(source=source, operators={})
+        operators = cache["operators"]
+        if mass not in operators:
+            traced = replace(source, support_mass=None, signals_mass=None)
+            operators[mass] = pixelized_operator(self, mass, traced)
+        return operators[mass]
 
     def repeated_source(self, mass, source: "PixelizedSource") -> "SourceSystem | None":
         """The source's fixed part of the linear system if the previous fit had the same
