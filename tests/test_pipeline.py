@@ -23,7 +23,16 @@ from mgelens.imaging import Imaging
 from mgelens.isophotes import STATISTICS_SMA_RANGE, isophote_table
 from mgelens.mask import contaminant_regions_from_noise
 from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
-from mgelens.pipeline import mass_rescan, models, problem, products, records, run, sp_start
+from mgelens.pipeline import (
+    mass_rescan,
+    mesh_tuning,
+    models,
+    problem,
+    products,
+    records,
+    run,
+    sp_start,
+)
 from mgelens.pipeline.phases import light as light_phase
 from mgelens.pipeline.phases import mass as mass_phase
 from mgelens.pipeline.phases import sp as sp_phase
@@ -1302,10 +1311,92 @@ def test_mass_phase_pools_equal_weight_runs_on_two_source_meshes(sersic_run, moc
     assert abs(elsewhere.log_evidence - written) > 1e-3
 
 
+def test_a_mass_mesh_other_than_spix2s_carries_hyper_parameters_tuned_to_it(sersic_run, mock_dir):
+    """With ``mass_mesh_tuning`` (quick) MASS's seed-1 mesh holds the hyper-parameters of
+    a search of SPix2's ln ε on that mesh: the record's ln ε is SPix2's likelihood there,
+    recomputed independently, at least the start's, and above SPix2's own values on that
+    mesh; the seed-0 mesh (SPix2's) keeps SPix2's values; the paper profile tunes none."""
+    assert (
+        profile_settings("quick").mass_mesh_tuning,
+        profile_settings("paper").mass_mesh_tuning,
+    ) == (True, False)
+    meshes = json.loads((sersic_run / "mass" / "result.json").read_text())["settings"]["meshes"]
+    assert meshes[0]["mesh_tuning"] is None
+    tuning = meshes[1]["mesh_tuning"]
+    assert tuning["tuned"]
+    assert 1 < tuning["n_calls"] <= mesh_tuning.TUNING_CALLS + 10
+    spix2 = PhaseResult.read(sersic_run / "spix2")
+    on_mesh = spix2_phase.problem(mock_dir, sersic_run, sersic_settings(kmeans_seed=1), LENS)
+    at_spix2 = fit(on_mesh.dataset, on_mesh.model.build(spix2.max_likelihood)).log_evidence
+    tuned = fit(
+        on_mesh.dataset, on_mesh.model.build({**spix2.max_likelihood, **tuning["hyperparameters"]})
+    ).log_evidence
+    assert tuning["start_log_evidence"] == pytest.approx(at_spix2, abs=1e-6)
+    assert tuning["log_evidence"] == pytest.approx(tuned, abs=1e-6)
+    assert tuned > at_spix2 + 1.0
+    assert set(tuning["hyperparameters"]) == {
+        n for n in spix2.space.free_names if n.startswith(("mesh.", "regularization."))
+    }
+    # MASS's seed-1 problem holds them, in its space and in its source
+    problem = mass_phase.problem(mock_dir, sersic_run, sersic_settings(kmeans_seed=1), LENS)
+    for name, value in tuning["hyperparameters"].items():
+        assert problem.space.parameter(name).value == value
+    assert (
+        problem.model.source.source.regularization.outer_coefficient
+        == (tuning["hyperparameters"]["regularization.outer_coefficient"])
+    )
+    own = mass_phase.problem(mock_dir, sersic_run, sersic_settings(), LENS)
+    assert "mesh_tuning" not in own.model.source.describe()
+    for name in tuning["hyperparameters"]:
+        assert own.space.parameter(name).value == spix2.max_likelihood[name]
+    paper = mass_phase.problem(
+        mock_dir, sersic_run, sersic_settings(kmeans_seed=1, mass_mesh_tuning=False), LENS
+    )
+    for name in tuning["hyperparameters"]:
+        assert paper.space.parameter(name).value == spix2.max_likelihood[name]
+
+
+def test_mesh_tuning_is_a_deterministic_search_from_spix2s_values(
+    sersic_run, mock_dir, monkeypatch
+):
+    """The search never returns worse than its start, gives the same values twice (a
+    resumed MASS finds its checkpoint), returns the start when allowed one call, and
+    refuses a problem that frees more than the hyper-parameters; a finished run's values
+    are used as recorded, without searching again."""
+    spix2 = PhaseResult.read(sersic_run / "spix2")
+    on_mesh = spix2_phase.problem(mock_dir, sersic_run, sersic_settings(kmeans_seed=2), LENS)
+    first = mesh_tuning.tuned_hyperparameters(on_mesh, spix2.max_likelihood, max_calls=40)
+    again = mesh_tuning.tuned_hyperparameters(on_mesh, spix2.max_likelihood, max_calls=40)
+    assert first == again
+    assert first.log_evidence >= first.start_log_evidence
+    assert first.n_calls <= 45
+    alone = mesh_tuning.tuned_hyperparameters(on_mesh, spix2.max_likelihood, max_calls=1)
+    assert alone.n_calls == 1
+    assert alone.log_evidence == alone.start_log_evidence
+    for name in first.describe()["hyperparameters"]:
+        assert alone.values[name] == pytest.approx(spix2.max_likelihood[name], rel=1e-9)
+    sp1 = spix1_phase.problem(mock_dir, sersic_run, sersic_settings(), LENS)
+    with pytest.raises(ValueError, match="only SPix2's hyper-parameters can be tuned"):
+        mesh_tuning.tuned_hyperparameters(
+            sp1, PhaseResult.read(sersic_run / "spix1").max_likelihood
+        )
+    held = {**first.describe()["hyperparameters"]}
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("searched again")
+
+    monkeypatch.setattr(mass_phase, "tuned_hyperparameters", refuse)
+    problem = mass_phase.problem(
+        mock_dir, sersic_run, sersic_settings(kmeans_seed=2), LENS, hyperparameters=held
+    )
+    for name, value in held.items():
+        assert problem.space.parameter(name).value == value
+
+
 def test_mass_source_pixels_set_the_mass_meshes_alone(sersic_run, mock_dir):
-    """``mass_source_pixels`` gives MASS's meshes their own k-means pixel count, with
-    SPix2's hyper-parameters, while LIGHT keeps ``source_pixels``; unset, MASS takes
-    ``source_pixels``."""
+    """``mass_source_pixels`` gives MASS's meshes their own k-means pixel count (with
+    hyper-parameters tuned to it, quick), while LIGHT keeps ``source_pixels``; unset, MASS
+    takes ``source_pixels``."""
     assert sersic_settings().mass_source_pixels is None
     assert profile_settings("quick").mass_source_pixels is None
     assert profile_settings("paper").mass_source_pixels is None

@@ -670,10 +670,12 @@ class PhaseModel:
 
 
 # -- parameter spaces of the phases -----------------------------------------------------
-def frozen_component(previous: PhaseResult, component: str) -> list[Parameter]:
-    """Parameters of ``component`` (e.g. "lens_light") fixed at ``previous``'s max-L values;
-    ties are kept."""
-    values = previous.max_likelihood
+def frozen_component(
+    previous: PhaseResult, component: str, values: Mapping[str, float] | None = None
+) -> list[Parameter]:
+    """Parameters of ``component`` (e.g. "lens_light") fixed at ``previous``'s max-L values,
+    or at ``values`` where given; ties are kept."""
+    values = previous.max_likelihood if values is None else values
     return [
         Parameter(p.name, tied_to=p.tied_to, limits=p.limits)
         if p.tied_to is not None

@@ -457,9 +457,12 @@ def _mesh_label(problem: PhaseProblem, n_meshes: int) -> str:
 
 def _mesh_run_record(problem: PhaseProblem, run: SamplerOutput, holds_best: bool) -> dict:
     """Result-file entry of one source-mesh run of a pooled phase (its samples are the
-    next ``n_samples`` rows of ``samples.csv``, in the order of the entries)."""
+    next ``n_samples`` rows of ``samples.csv``, in the order of the entries); with
+    ``mesh_tuning``, the search that gave the mesh its hyper-parameters
+    (:func:`mgelens.pipeline.phases.mass.source_values`), ``None`` for SPix2's own."""
     return {
         "kmeans_seed": _kmeans_seed(problem),
+        "mesh_tuning": problem.model.source.describe().get("mesh_tuning"),
         "log_evidence": run.log_evidence,
         "max_log_likelihood": float(run.log_likelihoods.max()),
         "n_calls": run.n_calls,
@@ -803,13 +806,19 @@ def max_likelihood_problem(
 
     :func:`scored_fit` of them is the fit of the phase's ``model.fits``: the problem is
     rebuilt from the settings recorded in ``result.json`` (in a pooled MASS phase, with the
-    k-means seed of the mesh whose run holds the highest-likelihood sample) and the
-    earlier phases' files in ``results_dir``.
+    k-means seed of the mesh whose run holds the highest-likelihood sample, and that run's
+    hyper-parameters where its mesh was tuned) and the earlier phases' files in
+    ``results_dir``.
     """
     settings, lens = recorded_settings(phase.settings)
     best = [mesh for mesh in phase.settings.get("meshes", []) if mesh["holds_max_likelihood"]]
     if best:
         settings = dataclasses.replace(settings, kmeans_seed=int(best[0]["kmeans_seed"]))
-    problem = build_problem(phase.phase, Path(lens_dir), Path(results_dir), settings, lens)
+    if phase.phase == "mass":  # a tuned mesh's values as its run held them, not searched again
+        problem = mass.problem(
+            Path(lens_dir), Path(results_dir), settings, lens, phase.max_likelihood
+        )
+    else:
+        problem = build_problem(phase.phase, Path(lens_dir), Path(results_dir), settings, lens)
     values = problem.space.values(problem.space.vector(phase.max_likelihood))
     return problem, values

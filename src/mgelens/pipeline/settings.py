@@ -111,11 +111,11 @@ class SlamSettings:
         workflow fits SPix2 once per count and LIGHT and MASS keep the chosen SPix2's
         count (:meth:`source_pixel_candidates`). SPix2 itself fits one count.
     mass_source_pixels : int or None
-        k-means source pixels of MASS's meshes alone, with SPix2's hyper-parameters;
-        None (both profiles): SPix2's count. The workflow passes it to MASS only, so
-        setting it reruns MASS and what follows. At 500 pixels the mesh SPix2 tuned its
-        hyper-parameters on stands far above other k-means seeds and the meshes' slopes
-        differ (docs/coverage.md, "The source mesh").
+        k-means source pixels of MASS's meshes alone, with SPix2's hyper-parameters (with
+        ``mass_mesh_tuning``, their own); None (both profiles): SPix2's count. The
+        workflow passes it to MASS only, so setting it reruns MASS and what follows. At
+        500 pixels the mesh SPix2 tuned its hyper-parameters on stands far above other
+        k-means seeds and the meshes' slopes differ (docs/coverage.md, "The source mesh").
     source_support : {"mask", "arcs"}
         Where SPix2's, LIGHT's and MASS's pixelized source may hold light: wherever the
         traced mask lands (``mask``, the paper's model), or only in the source pixels that
@@ -146,12 +146,21 @@ class SlamSettings:
         of jumping by tens in ln ε when they change by a part in 10⁴.
     mass_meshes : int
         Source-mesh realisations of the MASS phase (k-means seeds ``kmeans_seed`` onwards,
-        SPix2's hyper-parameters in each): one nested-sampling run per mesh, the
-        posteriors pooled with equal weights (:func:`mgelens.pipeline.run.chain_settings`).
-        1 (paper) samples SPix2's own mesh only, and the posterior is then conditional on
-        where k-means put its centres. With ``samplers: mass: n_processes`` ≥ 2 the runs
-        go side by side, one process each, with the one-process samples
+        SPix2's hyper-parameters in each, or with ``mass_mesh_tuning`` each its own): one
+        nested-sampling run per mesh, the posteriors pooled with equal weights
+        (:func:`mgelens.pipeline.run.chain_settings`). 1 (paper) samples SPix2's own mesh
+        only, and the posterior is then conditional on where k-means put its centres. With
+        ``samplers: mass: n_processes`` ≥ 2 the runs go side by side, one process each,
+        with the one-process samples
         (:func:`mgelens.pipeline.run._sample_runs`).
+    mass_mesh_tuning : bool
+        Give each MASS mesh whose k-means seed is not SPix2's its own hyper-parameters: a
+        local search of SPix2's ln ε on that mesh from SPix2's values
+        (:mod:`mgelens.pipeline.mesh_tuning`; on in the quick profile). Off (paper), every
+        mesh carries SPix2's values, which were chosen on SPix2's own mesh, and another
+        mesh is then an ordinary draw, tens to hundreds lower in ln ε, whose mass
+        posterior can lie in another basin (docs/coverage.md, "Each mesh its own
+        hyper-parameters").
     interpolation : {"natural_neighbour", "nearest"}
         Source-plane interpolation.
     cross_offset : {"anchor", "paper"}
@@ -238,6 +247,7 @@ class SlamSettings:
     kmeans_seed: int = 0
     kmeans_seeding: str = "kmeans++"
     mass_meshes: int = 1
+    mass_mesh_tuning: bool = False
     interpolation: str = "natural_neighbour"
     cross_offset: str = "anchor"
     adaptive_signals: str = "anchor"
@@ -524,6 +534,7 @@ PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
             spix1_rescan=True,
             source_support="arcs",
             mass_meshes=2,
+            mass_mesh_tuning=True,
             source_pixels=500,
             overlay_shape=(24, 24),
             fit=FitSettings(
