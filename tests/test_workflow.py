@@ -385,11 +385,16 @@ def test_a_lens_light_column_and_a_slam_lens_light_setting_contradict(tmp_path):
             '"adaptive_signals_mass"',
             """{"adaptive_signals_mass": "fitted", "profile": "quick"}""",
         ),
+        (
+            "  mass_mesh_tuning: false\n",
+            '"mass_mesh_tuning"',
+            """{"mass_mesh_tuning": false, "profile": "quick"}""",
+        ),
     ],
 )
 def test_settings_of_mass_alone_reach_mass_only(tmp_path, section, key, slam):
-    """One phase's sampler settings, ``mass_source_pixels`` and ``adaptive_signals_mass``
-    go to MASS's --slam only."""
+    """One phase's sampler settings, ``mass_source_pixels``, ``mass_mesh_tuning`` and
+    ``adaptive_signals_mass`` go to MASS's --slam only."""
     (tmp_path / "config.yaml").write_text("slam:\n" + section)
     result = snakemake(
         "results/M1/mass/result.json", "-n", "-p", "--configfile",

@@ -544,8 +544,8 @@ def phase_settings(wildcards) -> str:
     """The config's slam: section as JSON, with the lens's `lens_light` settings
     (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
     changing one phase's sampler reruns that phase (and the phases after it) only;
-    `mass_source_pixels` and `adaptive_signals_mass` (LIGHT's mass is SPix2's, whose
-    signals it holds either way) go to MASS only, `source_support`, `arc_noise_floor` and
+    `mass_source_pixels`, `mass_mesh_tuning` and `adaptive_signals_mass` (LIGHT's mass
+    is SPix2's, whose signals it holds either way) go to MASS only, `source_support`, `arc_noise_floor` and
     `kmeans_seeding` (the k-means mesh's) to the phases from SPix2 on, and
     `lens_light_prior` to LIGHT and MASS, likewise. An SPix2 candidate (`spix2_n<count>`)
     gets its own count as `source_pixels`."""
@@ -558,6 +558,7 @@ def phase_settings(wildcards) -> str:
     phase = phase_name(wildcards)
     if phase != "mass":
         section.pop("mass_source_pixels", None)
+        section.pop("mass_mesh_tuning", None)
         section.pop("adaptive_signals_mass", None)
     if phase in ("sp", "spix1"):
         section.pop("source_support", None)

@@ -4,8 +4,8 @@ SPix2 chooses the k-means weights (floor, power, the arcs' threshold) and the
 regularization on the mesh of one k-means seed. Its ln ε is spiky in those values: a
 change of a part in 10⁴ re-draws the k-means mesh (``slam.kmeans_seeding``), and the
 evidence of the mesh jumps by tens to hundreds. SPix2's sampling ends on a mesh that fits
-well; another seed's mesh under the same values is an ordinary draw, 10–620 lower in
-ln ε, and MASS's posterior on it can lie in another basin of the mass
+well; another seed's mesh under the same values is an ordinary draw, tens to hundreds
+lower in ln ε, and MASS's posterior on it can lie in another basin of the mass
 (docs/coverage.md, "Each mesh its own hyper-parameters").
 
 :func:`tuned_hyperparameters` gives such a mesh its own values: a Nelder–Mead search of
@@ -26,8 +26,8 @@ from mgelens.pipeline import models
 from mgelens.pipeline.problem import PhaseProblem
 
 TUNING_CALLS = 250
-"""Most ln ε evaluations of one mesh's search (about 40–60 s of a 3″ lens's SPix2 calls
-at 1,000 pixels on one core)."""
+"""Most ln ε evaluations of one mesh's search (SPix2 calls; their cost is in
+docs/coverage.md, "Each mesh its own hyper-parameters")."""
 
 SIMPLEX_STEP = 0.05
 """Initial simplex: the start and one step of this size along each unit-cube axis (back
