@@ -1341,10 +1341,8 @@ def test_a_mass_mesh_other_than_spix2s_carries_hyper_parameters_tuned_to_it(sers
     problem = mass_phase.problem(mock_dir, sersic_run, sersic_settings(kmeans_seed=1), LENS)
     for name, value in tuning["hyperparameters"].items():
         assert problem.space.parameter(name).value == value
-    assert (
-        problem.model.source.source.regularization.outer_coefficient
-        == (tuning["hyperparameters"]["regularization.outer_coefficient"])
-    )
+    held = problem.model.source.source.regularization
+    assert held.outer_coefficient == tuning["hyperparameters"]["regularization.outer_coefficient"]
     own = mass_phase.problem(mock_dir, sersic_run, sersic_settings(), LENS)
     assert "mesh_tuning" not in own.model.source.describe()
     for name in tuning["hyperparameters"]:

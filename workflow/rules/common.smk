@@ -545,8 +545,9 @@ def phase_settings(wildcards) -> str:
     (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
     changing one phase's sampler reruns that phase (and the phases after it) only;
     `mass_source_pixels`, `mass_mesh_tuning` and `adaptive_signals_mass` (LIGHT's mass
-    is SPix2's, whose signals it holds either way) go to MASS only, `source_support`, `arc_noise_floor` and
-    `kmeans_seeding` (the k-means mesh's) to the phases from SPix2 on, and
+    is SPix2's, whose signals it holds either way) go to MASS only, `source_support`,
+    `arc_noise_floor` and `kmeans_seeding` (the k-means mesh's) to the phases from SPix2
+    on, and
     `lens_light_prior` to LIGHT and MASS, likewise. An SPix2 candidate (`spix2_n<count>`)
     gets its own count as `source_pixels`."""
     light = lens_light_settings(wildcards.lens)

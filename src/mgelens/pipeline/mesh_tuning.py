@@ -33,6 +33,9 @@ SIMPLEX_STEP = 0.05
 """Initial simplex: the start and one step of this size along each unit-cube axis (back
 towards the centre where a step forward would leave the cube)."""
 
+HYPER_PREFIXES = (models.MESH + ".", models.REGULARIZATION + ".")
+"""The components SPix2 fits and LIGHT and MASS hold."""
+
 UNIT_MARGIN = 1e-9
 """Unit-cube points are kept this far inside the cube, where every prior transform is
 finite (a LogUniform's 0 and 1 are its bounds, a Uniform weight floor of exactly 1 is
@@ -70,10 +73,6 @@ class MeshTuning:
             "n_calls": self.n_calls,
             "hyperparameters": hyper,
         }
-
-
-HYPER_PREFIXES = (models.MESH + ".", models.REGULARIZATION + ".")
-"""The components SPix2 fits and LIGHT and MASS hold."""
 
 
 def tuned_hyperparameters(
