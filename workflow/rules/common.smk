@@ -540,16 +540,28 @@ def light_candidate_labels(wildcards) -> str:
     return " ".join(model.label for model in lens_light_models(wildcards.lens))
 
 
+_FROM_SPIX2 = ("spix2", "light", "mass")
+PHASE_SETTINGS = {
+    "mass_source_pixels": ("mass",),
+    "mass_mesh_tuning": ("mass",),
+    "adaptive_signals_mass": ("mass",),
+    "source_support": _FROM_SPIX2,
+    "arc_noise_floor": _FROM_SPIX2,
+    "kmeans_seeding": _FROM_SPIX2,
+    "lens_light_prior": ("light", "mass"),
+}
+"""slam: settings that reach only the phases listed, so that changing one reruns those
+phases (and the phases after them) only: MASS's own mesh settings and its adaptive signals
+(LIGHT's mass is SPix2's, whose signals it holds either way), the k-means mesh's and the
+source support's from SPix2 on, and the MGE intensities' prior in LIGHT and MASS."""
+
+
 def phase_settings(wildcards) -> str:
     """The config's slam: section as JSON, with the lens's `lens_light` settings
     (:func:`lens_light_settings`) and the sampler settings of this phase only, so that
-    changing one phase's sampler reruns that phase (and the phases after it) only;
-    `mass_source_pixels`, `mass_mesh_tuning` and `adaptive_signals_mass` (LIGHT's mass
-    is SPix2's, whose signals it holds either way) go to MASS only, `source_support`,
-    `arc_noise_floor` and `kmeans_seeding` (the k-means mesh's) to the phases from SPix2
-    on, and
-    `lens_light_prior` to LIGHT and MASS, likewise. An SPix2 candidate (`spix2_n<count>`)
-    gets its own count as `source_pixels`."""
+    changing one phase's sampler reruns that phase (and the phases after it) only; the
+    settings of :data:`PHASE_SETTINGS` go to their phases only, likewise. An SPix2
+    candidate (`spix2_n<count>`) gets its own count as `source_pixels`."""
     light = lens_light_settings(wildcards.lens)
     section = {**config["slam"], **light}
     fit = {**(config["slam"].get("fit") or {}), **light.get("fit", {})}
@@ -557,16 +569,9 @@ def phase_settings(wildcards) -> str:
         section["fit"] = fit
     samplers = section.pop("samplers", None) or {}
     phase = phase_name(wildcards)
-    if phase != "mass":
-        section.pop("mass_source_pixels", None)
-        section.pop("mass_mesh_tuning", None)
-        section.pop("adaptive_signals_mass", None)
-    if phase in ("sp", "spix1"):
-        section.pop("source_support", None)
-        section.pop("arc_noise_floor", None)
-        section.pop("kmeans_seeding", None)
-    if phase in ("sp", "spix1", "spix2"):
-        section.pop("lens_light_prior", None)
+    for key, phases in PHASE_SETTINGS.items():
+        if phase not in phases:
+            section.pop(key, None)
     if phase in samplers:
         section["samplers"] = {phase: samplers[phase]}
     if wildcards.phase.startswith(SPIX2_PREFIX):
