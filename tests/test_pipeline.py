@@ -25,6 +25,7 @@ from mgelens.mask import contaminant_regions_from_noise
 from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
 from mgelens.pipeline import (
     mass_rescan,
+    mesh_pool,
     mesh_tuning,
     models,
     problem,
@@ -1352,6 +1353,55 @@ def test_a_mass_mesh_other_than_spix2s_carries_hyper_parameters_tuned_to_it(sers
     )
     for name in tuning["hyperparameters"]:
         assert paper.space.parameter(name).value == spix2.max_likelihood[name]
+
+
+def test_mass_mesh_jobs_pool_into_the_whole_phases_result(sersic_run, mock_dir):
+    """MASS's meshes run as separate jobs (``--mesh k``) and pooled (``--pool-meshes``)
+    give the whole phase's result: samples.csv and model.fits byte for byte, result.json
+    equal but for the runtime; the pool refuses a mesh job missing, of another seed, of
+    other settings or of inputs that changed since."""
+    settings = sersic_settings()
+    for mesh in (0, 1):
+        run.run_phase("mass", mock_dir, sersic_run, settings, LENS, seed=1, threads=1, mesh=mesh)
+        record = json.loads((sersic_run / f"mass_mesh{mesh}" / "result.json").read_text())
+        assert record["settings"]["mesh"] == mesh
+        assert record["settings"]["model"]["source"]["kmeans_seed"] == mesh
+        assert record["sampler"]["seed"] == 1 + mesh
+    arguments = ["phase", "mass", "--lens-dir", str(mock_dir), "--results", str(sersic_run)]
+    slam = json.dumps(settings.to_dict())
+    pooled = [*arguments, "--seed", "1", "--slam", slam, "--pool-meshes", "--folder", "pooled"]
+    assert main(pooled) == 0
+    whole, joined = sersic_run / "mass", sersic_run / "pooled"
+    for name in ("samples.csv", "model.fits"):
+        assert (joined / name).read_bytes() == (whole / name).read_bytes()
+    records = [json.loads((folder / "result.json").read_text()) for folder in (whole, joined)]
+    for record in records:
+        record["sampler"].pop("runtime_s")
+    assert records[0] == records[1]
+    assert [m["kmeans_seed"] for m in records[1]["settings"]["meshes"]] == [0, 1]
+    # another seed, other settings, a missing mesh job, a changed input
+    with pytest.raises(mesh_pool.MeshPoolError, match=r"sampled with seed 1, not 3"):
+        mesh_pool.pool_meshes(sersic_run, settings, seed=3, folder_name="refused")
+    other = sersic_settings(mass_source_pixels=40)
+    with pytest.raises(mesh_pool.MeshPoolError, match="written with other slam settings"):
+        mesh_pool.pool_meshes(sersic_run, other, seed=1, folder_name="refused")
+    with pytest.raises(ValueError, match=r"mesh 2 of phase 'mass'.*mesh 0 to 1"):
+        run.run_phase("mass", mock_dir, sersic_run, settings, LENS, seed=1, mesh=2)
+    shutil.move(sersic_run / "mass_mesh1", sersic_run / "moved")
+    with pytest.raises(mesh_pool.MeshPoolError, match=r"mass_mesh1/result.json not found"):
+        mesh_pool.pool_meshes(sersic_run, settings, seed=1, folder_name="refused")
+    shutil.move(sersic_run / "moved", sersic_run / "mass_mesh1")
+    adapt = sersic_run / "spix1" / "adapt_image.fits"
+    original = adapt.read_bytes()
+    try:
+        with fits.open(adapt) as hdus:
+            hdus[0].data = hdus[0].data * 1.001
+            hdus.writeto(adapt, overwrite=True)
+        with pytest.raises(mesh_pool.MeshPoolError, match=r"adapt_image\.fits changed after"):
+            mesh_pool.pool_meshes(sersic_run, settings, seed=1, folder_name="refused")
+    finally:
+        adapt.write_bytes(original)
+    assert not (sersic_run / "refused").exists()
 
 
 def test_mesh_tuning_is_a_deterministic_search_from_spix2s_values(

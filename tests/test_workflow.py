@@ -42,8 +42,11 @@ def test_dry_run_of_the_default_sample_makes_m1_to_m3(tmp_path):
     assert counts["simulate_mock"] == 3
     assert counts["preview"] == 3
     # the default target is the whole DAG: five phases and isophotes per lens, summary
-    assert counts["phase"] == 9  # SP, SPix2, MASS
+    assert counts["phase"] == 6  # SP, SPix2
     assert counts["phase_spix1"] == 3  # SPix1, which also writes the adapt image
+    # MASS: each of the quick profile's two source meshes its own job, then their pool
+    assert counts["mass_mesh"] == 6
+    assert counts["pool_mass"] == 3
     assert counts["phase_light"] == 3  # the sheet pins M1-M3's LIGHT model
     assert "choose_light" not in counts
     assert counts["isophotes"] == 3
@@ -63,28 +66,45 @@ def test_dry_run_of_one_lens_slam_chain_runs_five_phases(tmp_path):
     assert result.returncode == 0, result.stderr
     output = result.stdout + result.stderr
     counts = job_counts(output)
-    assert counts["phase"] == 3
-    assert counts["phase_spix1"] == counts["phase_light"] == 1
+    assert counts["phase"] == 2
+    assert counts["phase_spix1"] == counts["phase_light"] == counts["pool_mass"] == 1
+    assert counts["mass_mesh"] == 2
     assert counts["simulate_mock"] == 1
     for phase in ("sp", "spix1", "spix2", "light", "mass"):
         assert f"mgelens phase {phase} " in output
+    for mesh in (0, 1):
+        assert (
+            "mgelens phase mass --lens-dir results/M2/mock --results results/M2 --threads 1 "
+            f"--mask-radius 1.6 --mesh {mesh} --seed 0 --slam" in output
+        )
+    assert (
+        "mgelens phase mass --pool-meshes --lens-dir results/M2/mock --results results/M2 "
+        "--seed 0 --slam" in output
+    )
     # the sheet's mask radius reaches every phase, its MGE complexity and point set the
     # LIGHT phase that reads them, and the config's slam: section goes as JSON
-    assert output.count("--mask-radius 1.6") == 5
+    assert output.count("--mask-radius 1.6") == 6
     assert output.count("--mge-sets 4 --point-set yes") == 1
     assert (
         "mgelens phase light --lens-dir results/M2/mock --results results/M2 --threads 1 "
         "--mask-radius 1.6 --mge-sets 4 --point-set yes" in output
     )
-    assert output.count("""--slam '{"profile": "quick"}'""") == 5
+    assert output.count("""--slam '{"profile": "quick"}'""") == 7
     assert output.count("--point-set yes --seed 0 --slam") == 1
-    assert output.count("--seed 0") == 5  # the config's sampler_seed
+    assert output.count("--seed 0") == 7  # the config's sampler_seed
     # SPix1's adapt image is a declared output and an input of SPix2, LIGHT and MASS
     assert output.count("results/M2/spix1/adapt_image.fits") >= 4
     # mocks first (a lens cannot start without its mock), then
     # earlier phases first (SP highest), so every lens's SP starts early
     priorities = dict(re.findall(r"phase=(\w+)\n\s+priority: (\d+)", output))
-    assert priorities == {"sp": "5", "spix1": "4", "spix2": "3", "light": "2", "mass": "1"}
+    assert priorities == {
+        "sp": "5",
+        "spix1": "4",
+        "spix2": "3",
+        "light": "2",
+        "mass_mesh0": "1",
+        "mass_mesh1": "1",
+    }
     assert re.search(r"rule simulate_mock:(\n\s+\w+:.*)*\n\s+priority: 6", output)
 
 
@@ -120,7 +140,7 @@ def test_a_list_of_source_pixel_counts_fits_spix2_per_count_and_chooses(tmp_path
     commands = [line.removeprefix("Shell command: ") for line in output.splitlines()]
     assert counts["spix2_candidate"] == 6
     assert counts["choose_source_pixels"] == 3
-    assert counts["phase"] == 6  # SP and MASS of M1–M3
+    assert counts["phase"] == 3  # SP of M1–M3 (MASS: rules mass_mesh and pool_mass)
     for n in (500, 1000):
         line = next(
             line
@@ -202,7 +222,8 @@ def test_a_contaminants_file_reaches_every_phase_as_option_and_input(tmp_path):
     result = snakemake(*targets, "-n", "-p", "--configfile", str(config), workdir=tmp_path)
     output = result.stdout + result.stderr
     assert result.returncode == 0, output
-    assert output.count(f"--contaminants '{circles}'") == len(PHASES) + 1  # and the preview
+    # every phase (MASS: its two mesh jobs) and the preview
+    assert output.count(f"--contaminants '{circles}'") == len(PHASES) + 2
     inputs = re.findall(r"rule (\w+):\n(?:.*\n)*?\s+input: (.*)", output)
     reading = {rule for rule, files in inputs if str(circles) in files}
     assert reading >= {"phase", "phase_light", "overview", "fit_quality", "preview"}
@@ -221,7 +242,7 @@ def test_sampler_seed_reaches_every_phase(tmp_path):
     )
     assert result.returncode == 0, result.stderr
     output = result.stdout + result.stderr
-    assert output.count("--seed 7") == 5
+    assert output.count("--seed 7") == 7  # MASS: its two mesh jobs and their pool
     assert "--seed 0" not in output
 
 
@@ -344,7 +365,9 @@ def test_the_paper_mock_comparison_is_nine_rows_each_with_its_lens_light_model(t
     whole = snakemake("-n", "--configfile", "config/paper_mocks.yaml", workdir=tmp_path)
     counts = job_counts(whole.stdout + whole.stderr)
     assert counts["simulate_mock"] == 9
-    assert counts["phase"] == 27
+    assert counts["phase"] == 18  # SP and SPix2 (MASS: rules mass_mesh and pool_mass)
+    assert counts["mass_mesh"] == 18
+    assert counts["pool_mass"] == 9
     assert counts["mock_study"] == counts["smoothness"] == 1
     sheet = pd.read_csv(ROOT / "config" / "paper_mocks.tsv", sep="\t")
     assert (
@@ -402,7 +425,8 @@ def test_settings_of_mass_alone_reach_mass_only(tmp_path, section, key, slam):
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     output = result.stdout + result.stderr
-    assert output.count(key) == 1  # quoted: the temporary folder's name holds the words
+    # MASS's two mesh jobs and their pool (quoted: the temporary folder's name holds the words)
+    assert output.count(key) == 3
     assert f"--slam '{slam}'" in output
 
 
@@ -426,7 +450,7 @@ def test_source_support_reaches_the_phases_from_spix2_on(tmp_path):
     assert seeded == {"spix2", "light", "mass"}
     floored = {line.split()[0] for line in commands if '"arc_noise_floor": 3' in line}
     assert floored == {"spix2", "light", "mass"}
-    assert len(commands) == 5
+    assert len(commands) == 7  # MASS: two mesh jobs and their pool
 
 
 SCHEMAS = ROOT / "workflow" / "schemas"
@@ -614,8 +638,8 @@ def test_light_models_chosen_by_evidence_and_a_sheet_pixel_scale(tmp_path):
     assert "--candidates X2+point X6+point X2 --threshold 3.5" in output
     assert "--results results/B --candidates X2+point X2 --threshold 3.5" in output
     assert "--results results/C --threads 1 --mask-radius 0.8 --mge-sets 4 --point-set no" in output
-    # B's pixel scale: SP, SPix1, SPix2, two LIGHT candidates, MASS, and the preview
-    assert output.count("--pixel-scale 0.05") == 7
+    # B's pixel scale: SP, SPix1, SPix2, two LIGHT candidates, MASS's two meshes, the preview
+    assert output.count("--pixel-scale 0.05") == 8
     # the candidates of a lens are LIGHT phases with its priority
     priorities = dict(re.findall(r"phase=(light\w*)\n\s+priority: (\d+)", output))
     assert set(priorities.values()) == {"2"}
@@ -721,20 +745,24 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     """`snakemake` (default target) on a small one-lens mock: mock, preview, the five
     phases, isophotes of the MASS lens light, the overview and posterior figures, the
     summary and the chain's cost. After
-    deleting the MASS result, asking for it reruns only MASS; the next default run redoes
-    only what reads it. (Snakemake does not rebuild a missing intermediate file on its own
-    while the files made from it are present.)"""
+    deleting the MASS result, asking for it reruns only the pooling of MASS's mesh jobs,
+    which writes the same bytes, so the next default run redoes only the cost table.
+    (Snakemake does not rebuild a missing intermediate file on its own while the files made
+    from it are present.)"""
     (tmp_path / "sheet.tsv").write_text(SHEET_HEADER + "M1\tmock\tM1\t\t1.4\t2\tno\t0.28\t0.98\n")
     config = tmp_path / "smoke.yaml"
     config.write_text(SMOKE_CONFIG.format(sheet=tmp_path / "sheet.tsv"))
     result = snakemake("-c2", "--configfile", str(config), workdir=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
     lens = tmp_path / "results" / "M1"
-    for phase in ("sp", "spix1", "spix2", "light", "mass"):
+    for phase in ("sp", "spix1", "spix2", "light", "mass_mesh0", "mass_mesh1"):
         assert (lens / phase / "result.json").is_file()
-        cap = "max_calls" if phase == "mass" else "max_iterations"
+        cap = "max_calls" if phase.startswith("mass") else "max_iterations"
         assert f"stopped at {cap}" in (lens / phase / "phase.log").read_text()
         assert (lens / "benchmarks" / f"{phase}.tsv").read_text().startswith("s\t")
+    # MASS's two meshes were jobs of their own, pooled into mass/
+    assert "phase mass pooled from the mesh jobs" in (lens / "mass" / "phase.log").read_text()
+    assert len(json.loads((lens / "mass" / "result.json").read_text())["settings"]["meshes"]) == 2
     assert (lens / "spix1" / "adapt_image.fits").is_file()
     summary = json.loads((lens / "isophotes.json").read_text())
     mass = json.loads((lens / "mass" / "result.json").read_text())["max_likelihood"]
@@ -751,9 +779,13 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     cost = pd.read_csv(tmp_path / "results" / "summary" / "chain_cost.csv").iloc[0]
     assert cost["lens"] == "M1"
     assert bool(cost["complete"])
+    jobs = {"mass": ("mass_mesh0", "mass_mesh1", "mass_pool")}
     for phase in ("sp", "spix1", "spix2", "light", "mass"):
-        measured = pd.read_csv(lens / "benchmarks" / f"{phase}.tsv", sep="\t")
-        assert cost[f"{phase}_cpu_s"] == pytest.approx(measured["cpu_time"].sum())
+        measured = [
+            pd.read_csv(lens / "benchmarks" / f"{job}.tsv", sep="\t")["cpu_time"].sum()
+            for job in jobs.get(phase, (phase,))
+        ]
+        assert cost[f"{phase}_cpu_s"] == pytest.approx(sum(measured))
     n_calls = json.loads((lens / "mass" / "result.json").read_text())["sampler"]["n_calls"]
     assert cost["mass_calls"] == n_calls
     assert (tmp_path / "results" / "summary" / "chain_cost.png").stat().st_size > 10_000
@@ -833,15 +865,14 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
     target = "results/M1/mass/result.json"
     rerun = snakemake("-c2", f"--configfile={config}", target, workdir=tmp_path)
     assert rerun.returncode == 0, rerun.stdout + rerun.stderr
-    assert job_counts(rerun.stdout + rerun.stderr) == {"phase": 1, "total": 1}
-    assert "mgelens phase mass " in rerun.stdout + rerun.stderr
+    # the mesh jobs' results are there: only their pool runs again
+    assert job_counts(rerun.stdout + rerun.stderr) == {"pool_mass": 1, "total": 1}
+    assert "mgelens phase mass --pool-meshes " in rerun.stdout + rerun.stderr
     after = snakemake("-n", f"--configfile={config}", workdir=tmp_path)
     counts = job_counts(after.stdout + after.stderr)
-    assert counts == {
-        "fit_quality": 1, "isophotes": 1, "overview": 1, "posterior": 1, "recovery": 1,
-        "recovery_table": 1, "coverage": 1, "mock_study": 1, "summary": 1, "chain_cost": 1,
-        "all": 1, "total": 11,
-    }  # fmt: skip
+    # the pool wrote the same bytes (its runtime is the mesh jobs'), so what reads MASS's
+    # result stays; only the cost table, which reads the pool's benchmark file, is redone
+    assert counts == {"chain_cost": 1, "all": 1, "total": 2}
 
 
 # The whole SLaM chain of one paper mock with the default (quick) configuration:

@@ -6,7 +6,8 @@ A phase job's benchmark file ``results/<lens>/benchmarks/<job>.tsv`` (Snakemake'
 columns: ``s`` wall-clock seconds, ``cpu_time`` CPU seconds, ``max_rss`` MB, …) sits
 beside its folder ``results/<lens>/<job>/`` with ``result.json`` (the sampler's
 ``n_calls``). A chain's jobs are SP, SPix1, SPix2, its LIGHT job (``light`` where the
-sheet pins the model, else every candidate ``light_x6_point`` …) and MASS
+sheet pins the model, else every candidate ``light_x6_point`` …) and MASS (``mass``, or
+its mesh jobs ``mass_mesh<k>`` and the job that pools them, ``mass_pool``)
 (:data:`CHAIN_PHASES`); the workflow passes exactly those (rule ``chain_cost``), so files
 left from another configuration do not count. A benchmark file records the last run of
 its job: a phase resumed after an interruption counts that run's time only, while its
@@ -21,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from mgelens.pipeline.mesh_pool import POOL_JOB
 from mgelens.pipeline.sp_start import START_FILE
 from mgelens.search.results import RESULT_FILE
 
@@ -93,10 +95,14 @@ def _read_json(path: Path, job: str) -> dict:
 
 
 def _calls(lens_folder: Path, job: str) -> float:
-    """Sampler calls in ``<job>/result.json``; NaN without the record. Where SP's record
+    """Sampler calls in ``<job>/result.json``; NaN without the record, none for the job
+    that pools MASS's mesh jobs (:data:`~mgelens.pipeline.mesh_pool.POOL_JOB`, whose
+    calls are theirs). Where SP's record
     says it started from the search (``sp_start: search``), the calls of its start record
     (:data:`~mgelens.pipeline.sp_start.START_FILE`) count among SP's, also where a rerun of
     SP reused the record instead of searching again."""
+    if job == POOL_JOB:
+        return 0.0
     path = lens_folder / job / RESULT_FILE
     if not path.is_file():
         return np.nan

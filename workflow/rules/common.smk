@@ -22,6 +22,8 @@ from mgelens.mock_study import PAPER_MOCKS
 from mgelens.pipeline.model_choice import candidates as light_candidates
 from mgelens.pipeline.pixel_choice import FOLDER_PREFIX as SPIX2_PREFIX
 from mgelens.pipeline.pixel_choice import folder as spix2_folder
+from mgelens.pipeline.mesh_pool import POOL_JOB
+from mgelens.pipeline.run import MESH_FOLDER_PREFIX, mesh_folder
 from mgelens.provenance import command_version
 from mgelens.pipeline.settings import SettingsError, settings_from_mapping
 from mgelens.sheet import SheetError, read_sample_sheet
@@ -294,14 +296,14 @@ def reference_tables() -> list[str]:
 
 def chain_cost_inputs(wildcards) -> list[str]:
     """The benchmark files of every lens's chain jobs (SP, SPix1, SPix2 or its candidates,
-    its LIGHT job or candidates, MASS) that the chain_cost step sums (mgelens.chain_cost),
+    its LIGHT job or candidates, MASS or its mesh jobs and their pool) that the chain_cost step sums (mgelens.chain_cost),
     for the config's and the sheet's current models only, not files left from another
     configuration."""
     files = []
     for lens in LENSES.index:
         models = lens_light_models(lens)
         light = ["light"] if len(models) == 1 else [model.folder for model in models]
-        jobs = ["sp", "spix1", *SPIX2_JOBS, *light, "mass"]
+        jobs = ["sp", "spix1", *SPIX2_JOBS, *light, *MASS_JOBS]
         files += [f"results/{lens}/benchmarks/{job}.tsv" for job in jobs]
     return files
 
@@ -411,10 +413,21 @@ choose_source_pixels compares by SPix2's evidence (mgelens.pipeline.pixel_choice
 CHOSEN_PIXELS = len(SOURCE_PIXELS) > 1
 SPIX2_JOBS = [spix2_folder(n) for n in SOURCE_PIXELS] if CHOSEN_PIXELS else ["spix2"]
 """The SPix2 jobs of every lens: one per candidate count, or `spix2` itself."""
+MESH_JOBS = (
+    [mesh_folder(k) for k in range(CONFIG_SETTINGS.mass_meshes)]
+    if CONFIG_SETTINGS.mass_meshes > 1
+    else []
+)
+"""MASS's source-mesh jobs of every lens (rule mass_mesh, `mass_mesh<k>`), which rule
+pool_mass pools into `mass/` (mgelens.pipeline.mesh_pool); none where MASS has one mesh
+(rule phase fits it whole)."""
+MESH_FOLDERS = "|".join(MESH_JOBS) or "(?!)"
+MASS_JOBS = [*MESH_JOBS, POOL_JOB] if MESH_JOBS else ["mass"]
+"""The MASS jobs of every lens whose benchmark files the chain's cost sums."""
 
 
 wildcard_constraints:
-    phase=f"{'|'.join(PHASES)}|{LIGHT_FOLDERS}|{SPIX2_FOLDERS}",
+    phase=f"{'|'.join(PHASES)}|{LIGHT_FOLDERS}|{SPIX2_FOLDERS}|{MESH_FOLDERS}",
 
 
 def lens_light_models(lens: str):
@@ -512,7 +525,8 @@ def phase_options(wildcards) -> str:
     """Per-lens CLI options from the sample sheet: the mask radius, pixel scale and
     contaminants file, and for
     LIGHT (the only phase that reads them) the MGE sets and point set of the pinned model
-    or of the candidate; a candidate's folder; then the config's sampler seed."""
+    or of the candidate; a candidate's folder or a MASS mesh job's mesh; then the config's
+    sampler seed."""
     row = lens_row(wildcards.lens)
     options = f"--mask-radius {row['mask_radius']}{pixel_scale_option(wildcards)}"
     options += contaminants_option(wildcards)
@@ -520,7 +534,9 @@ def phase_options(wildcards) -> str:
         model = light_model_of(wildcards)
         point = "yes" if model.point_set else "no"
         options += f" --mge-sets {model.mge_sets} --point-set {point}"
-    if wildcards.phase != phase_name(wildcards):
+    if wildcards.phase in MESH_JOBS:
+        options += f" --mesh {wildcards.phase.removeprefix(MESH_FOLDER_PREFIX)}"
+    elif wildcards.phase != phase_name(wildcards):
         options += f" --folder {wildcards.phase}"
     reference = light_bound_reference(wildcards)
     if reference is not None:
@@ -589,12 +605,19 @@ def lens_light_settings(lens: str) -> dict:
 
 def phase_name(wildcards) -> str:
     """The SLaM phase a `phase` wildcard runs: `light` for a LIGHT candidate's folder,
-    `spix2` for an SPix2 candidate's."""
+    `spix2` for an SPix2 candidate's, `mass` for a MASS mesh job's."""
     if wildcards.phase.startswith("light"):
         return "light"
+    if wildcards.phase in MESH_JOBS:
+        return "mass"
     if wildcards.phase.startswith(SPIX2_PREFIX):
         return "spix2"
     return wildcards.phase
+
+
+def mesh_job_results(wildcards) -> dict:
+    """result.json of each MASS mesh job of a lens (rule pool_mass)."""
+    return {job: f"results/{wildcards.lens}/{job}/result.json" for job in MESH_JOBS}
 
 
 def spix2_candidate_results(wildcards) -> list[str]:

@@ -7,6 +7,11 @@ lenses at a time; the config's `slam:` section goes to every phase (`--slam`) wi
 that phase's sampler settings, and changing it reruns the phases. SPix1 also writes the
 adapt image that SPix2, LIGHT and MASS read (rule `phase_spix1`).
 
+MASS: with several source meshes (`mass_meshes`, quick profile 2) each mesh is its own job
+(rule `mass_mesh`, `mass_mesh<k>/`), so that the scheduler runs them side by side, and
+rule `pool_mass` pools them into `mass/` (mgelens.pipeline.mesh_pool: the same files as
+one job sampling the meshes in turn); with one mesh rule `phase` fits MASS.
+
 SPix2: with one `source_pixels` count in the config, rule `phase` fits it. With a list,
 each count is fitted into `spix2_n<count>/` (rule `spix2_candidate`) and rule
 `choose_source_pixels` keeps the count SPix2's evidence prefers, copies it into `spix2/`,
@@ -26,7 +31,9 @@ rule phase:
         samples="results/{lens}/{phase}/samples.csv",
         model="results/{lens}/{phase}/model.fits",
     wildcard_constraints:
-        phase="sp|mass" if CHOSEN_PIXELS else "sp|spix2|mass",
+        phase="|".join(
+            ["sp", *([] if CHOSEN_PIXELS else ["spix2"]), *([] if MESH_JOBS else ["mass"])]
+        ),
     log:
         "logs/{lens}/{phase}.log",
     benchmark:
@@ -94,6 +101,41 @@ rule choose_source_pixels:
     shell:
         "mgelens choose --results results/{wildcards.lens} --source-pixels {params.counts} "
         "--threshold {params.threshold} --record {output.choice:q} > {log:q} 2>&1"
+
+
+use rule phase as mass_mesh with:
+    wildcard_constraints:
+        phase=MESH_FOLDERS,
+
+
+rule pool_mass:
+    input:
+        unpack(mesh_job_results),
+    output:
+        result="results/{lens}/mass/result.json",
+        samples="results/{lens}/mass/samples.csv",
+        model="results/{lens}/mass/model.fits",
+    wildcard_constraints:
+        lens=".+" if MESH_JOBS else "(?!)",
+    log:
+        f"logs/{{lens}}/{POOL_JOB}.log",
+    benchmark:
+        f"results/{{lens}}/benchmarks/{POOL_JOB}.tsv"
+    params:
+        mgelens_version=command_version("phase"),
+        lens_dir=lens_imaging_folder,
+        seed=config["sampler_seed"],
+        slam=lambda wildcards: phase_settings(SimpleNamespace(lens=wildcards.lens, phase="mass")),
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        "../envs/mgelens.yaml"
+    shell:
+        "mgelens phase mass --pool-meshes --lens-dir {params.lens_dir:q} "
+        "--results results/{wildcards.lens} --seed {params.seed} --slam {params.slam:q} "
+        "> {log:q} 2>&1"
 
 
 use rule phase as phase_light with:

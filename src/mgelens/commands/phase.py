@@ -17,7 +17,8 @@ sheet's columns) comes from ``--mask-radius`` (default: the folder's ``truth.jso
 ``--mask-centre``, ``--pixel-scale``, ``--contaminants`` (a text file of circles),
 ``--mge-sets`` (default 4) and ``--point-set`` (default yes). A LIGHT candidate given
 ``--bound-by`` is not sampled when it cannot win the model choice against that folder's
-candidate (:mod:`mgelens.pipeline.light_bound`).
+candidate (:mod:`mgelens.pipeline.light_bound`). MASS's source meshes can run as separate
+jobs, ``--mesh k`` for each, then ``--pool-meshes`` (:mod:`mgelens.pipeline.mesh_pool`).
 """
 
 import argparse
@@ -31,8 +32,9 @@ from mgelens.imaging_input import ImagingError
 from mgelens.mask import read_contaminant_circles
 from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import records
+from mgelens.pipeline.mesh_pool import pool_meshes
 from mgelens.pipeline.model_choice import DEFAULT_THRESHOLD
-from mgelens.pipeline.run import run_phase
+from mgelens.pipeline.run import mesh_folder, run_phase
 from mgelens.pipeline.settings import (
     MGE_SET_CHOICES,
     PHASES,
@@ -126,6 +128,19 @@ def register(subparsers) -> None:
         "an upper bound of its ln Z)",
     )
     parser.add_argument(
+        "--mesh",
+        type=int,
+        metavar="K",
+        help="mass only, with slam.mass_meshes >= 2: sample source mesh K alone into "
+        "<results>/mass_mesh<K> (seeds as the whole phase gives it); --pool-meshes pools them",
+    )
+    parser.add_argument(
+        "--pool-meshes",
+        action="store_true",
+        help="mass only: write <results>/mass from the mesh jobs' folders mass_mesh<k> "
+        "(same settings and --seed), without sampling",
+    )
+    parser.add_argument(
         "--bound-threshold",
         type=float,
         default=DEFAULT_THRESHOLD,
@@ -147,7 +162,14 @@ def run(args: argparse.Namespace) -> int:
             point_set=args.point_set == "yes",
             contaminants=read_contaminant_circles(args.contaminants) if args.contaminants else (),
         )
-        folder = args.folder or args.phase
+        if args.pool_meshes:
+            if args.phase != "mass" or args.mesh is not None:
+                raise ValueError(
+                    "--pool-meshes pools MASS's mesh jobs: use it with phase mass, no --mesh"
+                )
+            pool_meshes(args.results, settings, args.seed, args.folder or "mass")
+            return 0
+        folder = args.folder or (args.phase if args.mesh is None else mesh_folder(args.mesh))
         make_output_folders(args.results / folder / RESULT_FILE)
         run_phase(
             args.phase,
@@ -158,6 +180,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             folder_name=folder,
             bound_by=None if args.bound_by is None else (args.bound_by, args.bound_threshold),
+            mesh=args.mesh,
         )
     except (SettingsError, ImagingError, records.PhaseInputError, ValueError, OSError) as error:
         logger.error("phase %s: %s", args.phase, error)

@@ -327,11 +327,14 @@ def _solve(
     seed: int,
     lens_dir: Path,
     checksums: dict,
+    mesh: int | None = None,
 ) -> PhaseResult:
     """Sample each problem (one per source-mesh realisation, :func:`chain_settings`), pool
     the runs (:func:`~mgelens.search.posterior.pool_runs`) and write the phase's files; the
     maximum-likelihood fit is that of the run holding the highest-likelihood sample.
-    ``checksums`` are those of the problems' input files, recorded in the result."""
+    ``checksums`` are those of the problems' input files, recorded in the result; ``mesh``
+    the index of the one MASS mesh that ``problems`` holds in a mesh job
+    (:func:`run_phase`), recorded in the result's settings."""
     first = problems[0]
     sampler = sampler_for(settings.samplers[first.name], first.space.n_free)
     seeds = [seed + k for k in range(len(problems))]
@@ -350,7 +353,7 @@ def _solve(
         phase=best_problem.name,
         space=best_problem.space,
         output=output,
-        settings=_phase_settings(problems, outputs, best_run, settings, lens, lens_dir),
+        settings=_phase_settings(problems, outputs, best_run, settings, lens, lens_dir, mesh),
         input_checksums=checksums,
     )
     values = best_problem.space.values(output.max_likelihood())
@@ -399,10 +402,11 @@ def _phase_settings(
     settings: SlamSettings,
     lens: LensSpec,
     lens_dir: Path,
+    mesh: int | None = None,
 ) -> dict:
     """The ``settings`` record of ``result.json``: the chain's settings, the lens spec, the
     mask radius used and the model of the run holding the highest-likelihood sample, and
-    each mesh's run when MASS pooled several."""
+    each mesh's run when MASS pooled several; a MASS mesh job's index as ``mesh``."""
     best_problem = problems[best_run]
     phase_settings = {
         "profile": settings.profile,
@@ -415,9 +419,11 @@ def _phase_settings(
     }
     if len(problems) > 1:
         phase_settings["meshes"] = [
-            _mesh_run_record(run_problem, run, k == best_run)
+            mesh_run_record(run_problem.model.source.describe(), run, k == best_run)
             for k, (run_problem, run) in enumerate(zip(problems, outputs, strict=True))
         ]
+    if mesh is not None:
+        phase_settings["mesh"] = mesh
     return phase_settings
 
 
@@ -455,14 +461,15 @@ def _mesh_label(problem: PhaseProblem, n_meshes: int) -> str:
     return f", source mesh k-means seed {_kmeans_seed(problem)}"
 
 
-def _mesh_run_record(problem: PhaseProblem, run: SamplerOutput, holds_best: bool) -> dict:
+def mesh_run_record(source: dict, run: SamplerOutput, holds_best: bool) -> dict:
     """Result-file entry of one source-mesh run of a pooled phase (its samples are the
-    next ``n_samples`` rows of ``samples.csv``, in the order of the entries); with
+    next ``n_samples`` rows of ``samples.csv``, in the order of the entries), from the
+    description of the run's source model (``source``) and its output; with
     ``mesh_tuning``, the search that gave the mesh its hyper-parameters
     (:func:`mgelens.pipeline.phases.mass.source_values`), ``None`` for SPix2's own."""
     return {
-        "kmeans_seed": _kmeans_seed(problem),
-        "mesh_tuning": problem.model.source.describe().get("mesh_tuning"),
+        "kmeans_seed": source["kmeans_seed"],
+        "mesh_tuning": source.get("mesh_tuning"),
         "log_evidence": run.log_evidence,
         "max_log_likelihood": float(run.log_likelihoods.max()),
         "n_calls": run.n_calls,
@@ -531,6 +538,7 @@ def run_phase(
     threads: int | None = None,
     folder_name: str | None = None,
     bound_by: tuple[str, float] | None = None,
+    mesh: int | None = None,
 ) -> PhaseResult:
     """Run phase ``name`` of the lens in ``lens_dir``; write ``results_dir/<name>/``.
 
@@ -561,6 +569,12 @@ def run_phase(
         that candidate's ln Z (:mod:`~mgelens.pipeline.light_bound`), the phase writes the
         maximum found instead of sampling (``sampler.method`` "upper_bound"); otherwise it
         samples as usual.
+    mesh : int, optional
+        MASS only, with ``slam.mass_meshes`` ≥ 2: sample this one source mesh (0 … meshes
+        − 1: k-means seed ``kmeans_seed + mesh``, sampler seed ``seed + mesh``, as the
+        pooled phase samples it) into ``results_dir/mass_mesh<mesh>/`` (default folder),
+        for :func:`mgelens.pipeline.mesh_pool.pool_meshes` to pool; the meshes are then
+        separate jobs that a scheduler can run side by side.
 
     Returns
     -------
@@ -570,6 +584,15 @@ def run_phase(
         raise ValueError(f"unknown phase {name!r}; phases are {list(PHASES)}")
     if bound_by is not None and name != "light":
         raise ValueError(f"only a LIGHT candidate can be bounded by another, not phase {name!r}")
+    runs = chain_settings(name, settings)
+    if mesh is not None:
+        if name != "mass" or not 0 <= mesh < len(runs) or len(runs) == 1:
+            raise ValueError(
+                f"mesh {mesh} of phase {name!r}: only MASS with several source meshes runs "
+                f"one mesh alone, mesh 0 to {settings.mass_meshes - 1} (slam.mass_meshes "
+                f"is {settings.mass_meshes}); drop --mesh to run the phase whole"
+            )
+        runs = runs[mesh : mesh + 1]
     if folder_name is not None and (
         Path(folder_name).name != folder_name or folder_name in ("", ".", "..")
     ):
@@ -578,10 +601,9 @@ def run_phase(
         limit_threads(threads)
     lens_dir, results_dir = Path(lens_dir), Path(results_dir)
     lens = LensSpec() if lens is None else lens
-    folder = results_dir / (folder_name or name)
+    folder = results_dir / (folder_name or (name if mesh is None else mesh_folder(mesh)))
     folder.mkdir(parents=True, exist_ok=True)
     with phase_log(folder):
-        runs = chain_settings(name, settings)
         problems = [build_problem(name, lens_dir, results_dir, s, lens) for s in runs]
         first = problems[0]
         fittable.check_pixels_per_parameter(
@@ -602,7 +624,8 @@ def run_phase(
             )
             if skipped is not None:
                 return skipped
-        return _solve(problems, folder, settings, lens, seed, lens_dir, checksums)
+        run_seed = seed if mesh is None else seed + mesh
+        return _solve(problems, folder, settings, lens, run_seed, lens_dir, checksums, mesh)
 
 
 def _bounded_candidate(
@@ -779,6 +802,15 @@ def rescanned_spix1(
         reference=found.values,
         positions=positions,
     )
+
+
+MESH_FOLDER_PREFIX = "mass_mesh"
+"""Folder of a MASS mesh job: ``mass_mesh<index>`` (:func:`run_phase` with ``mesh``)."""
+
+
+def mesh_folder(mesh: int) -> str:
+    """The folder name of MASS mesh ``mesh``'s job."""
+    return f"{MESH_FOLDER_PREFIX}{mesh}"
 
 
 def chain_settings(name: str, settings: SlamSettings) -> list[SlamSettings]:
