@@ -11,7 +11,9 @@ its mesh jobs ``mass_mesh<k>`` and the job that pools them, ``mass_pool``)
 (:data:`CHAIN_PHASES`); the workflow passes exactly those (rule ``chain_cost``), so files
 left from another configuration do not count. A benchmark file records the last run of
 its job: a phase resumed after an interruption counts that run's time only, while its
-sampler's calls include the runs before (they are checkpointed).
+sampler's calls include the runs before (they are checkpointed). Snakemake samples a
+job's ``cpu_time`` (every 0.5 s for its first 15 s, then every 30 s), so it misses up to
+30 s of each job's last stretch: the CPU seconds are lower bounds, the wall seconds exact.
 """
 
 import json
