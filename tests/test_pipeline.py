@@ -1369,6 +1369,8 @@ def test_mass_mesh_jobs_pool_into_the_whole_phases_result(sersic_run, mock_dir):
         assert record["sampler"]["seed"] == 1 + mesh
     arguments = ["phase", "mass", "--lens-dir", str(mock_dir), "--results", str(sersic_run)]
     slam = json.dumps(settings.to_dict())
+    (sersic_run / "pooled").mkdir()  # a whole MASS run interrupted there left its checkpoint
+    (sersic_run / "pooled" / "checkpoint-0123456789abcdef.pickle").write_bytes(b"x")
     pooled = [*arguments, "--seed", "1", "--slam", slam, "--pool-meshes", "--folder", "pooled"]
     assert main(pooled) == 0
     whole, joined = sersic_run / "mass", sersic_run / "pooled"
@@ -1379,6 +1381,7 @@ def test_mass_mesh_jobs_pool_into_the_whole_phases_result(sersic_run, mock_dir):
         record["sampler"].pop("runtime_s")
     assert records[0] == records[1]
     assert [m["kmeans_seed"] for m in records[1]["settings"]["meshes"]] == [0, 1]
+    assert not list(joined.glob("checkpoint-*"))
     # another seed, other settings, a missing mesh job, a changed input
     with pytest.raises(mesh_pool.MeshPoolError, match=r"sampled with seed 1, not 3"):
         mesh_pool.pool_meshes(sersic_run, settings, seed=3, folder_name="refused")

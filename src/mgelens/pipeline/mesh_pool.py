@@ -24,7 +24,7 @@ import numpy as np
 from mgelens.atomic import atomic_path, write_json
 from mgelens.pipeline.problem import phase_log
 from mgelens.pipeline.records import MODEL_FILE
-from mgelens.pipeline.run import mesh_folder, mesh_run_record
+from mgelens.pipeline.run import CHECKPOINT_PREFIX, mesh_folder, mesh_run_record
 from mgelens.pipeline.settings import SlamSettings
 from mgelens.search.posterior import pool_runs
 from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
@@ -43,7 +43,9 @@ class MeshPoolError(ValueError):
 def pool_meshes(
     results_dir: str | Path, settings: SlamSettings, seed: int = 0, folder_name: str = "mass"
 ) -> PhaseResult:
-    """Pool the MASS mesh jobs of ``results_dir`` into ``results_dir/<folder_name>/``.
+    """Pool the MASS mesh jobs of ``results_dir`` into ``results_dir/<folder_name>/``
+    (``result.json``, ``samples.csv``, ``model.fits``, ``phase.log``; a sampler checkpoint
+    left there by an interrupted whole run is removed, as a finished phase removes its own).
 
     Parameters
     ----------
@@ -103,6 +105,8 @@ def pool_meshes(
         with atomic_path(folder / SAMPLES_FILE) as temporary:
             phase.samples_table().to_csv(temporary, index=False, float_format="%.17g")
         write_json(folder / RESULT_FILE, {**phase.summary(), "max_likelihood_fit": fit})
+        for stale in folder.glob(f"{CHECKPOINT_PREFIX}*"):  # of a whole run, interrupted
+            stale.unlink()
         logger.info(
             "phase mass pooled from the mesh jobs %s: ln Z = %.3f, max ln L = %.3f "
             "(mesh %d), %d calls; converged: %s",
