@@ -296,9 +296,9 @@ def reference_tables() -> list[str]:
 
 def chain_cost_inputs(wildcards) -> list[str]:
     """The benchmark files of every lens's chain jobs (SP, SPix1, SPix2 or its candidates,
-    its LIGHT job or candidates, MASS or its mesh jobs and their pool) that the chain_cost step sums (mgelens.chain_cost),
-    for the config's and the sheet's current models only, not files left from another
-    configuration."""
+    its LIGHT job or candidates, MASS or its mesh jobs and their pool) that the chain_cost
+    step sums (mgelens.chain_cost), for the config's and the sheet's current models only,
+    not files left from another configuration."""
     files = []
     for lens in LENSES.index:
         models = lens_light_models(lens)

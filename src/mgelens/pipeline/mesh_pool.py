@@ -21,13 +21,18 @@ from pathlib import Path
 
 import numpy as np
 
-from mgelens.atomic import atomic_path, write_json
+from mgelens.atomic import atomic_path
 from mgelens.pipeline.problem import phase_log
-from mgelens.pipeline.records import MODEL_FILE
-from mgelens.pipeline.run import CHECKPOINT_PREFIX, mesh_folder, mesh_run_record
+from mgelens.pipeline.records import MODEL_FILE, read_fit_record
+from mgelens.pipeline.run import (
+    CHECKPOINT_PREFIX,
+    mesh_folder,
+    mesh_run_record,
+    write_result_files,
+)
 from mgelens.pipeline.settings import SlamSettings
 from mgelens.search.posterior import pool_runs
-from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, PhaseResult, input_checksums
+from mgelens.search.results import RESULT_FILE, PhaseResult, input_checksums
 
 logger = logging.getLogger("mgelens.pipeline")
 
@@ -96,15 +101,13 @@ def pool_meshes(
         settings=record,
         input_checksums=best.input_checksums,
     )
-    fit = json.loads((folders[best_run] / RESULT_FILE).read_text())["max_likelihood_fit"]
+    fit = read_fit_record(folders[best_run])
     folder = results_dir / folder_name
     folder.mkdir(parents=True, exist_ok=True)
     with phase_log(folder):
         with atomic_path(folder / MODEL_FILE) as temporary:
             shutil.copyfile(folders[best_run] / MODEL_FILE, temporary)
-        with atomic_path(folder / SAMPLES_FILE) as temporary:
-            phase.samples_table().to_csv(temporary, index=False, float_format="%.17g")
-        write_json(folder / RESULT_FILE, {**phase.summary(), "max_likelihood_fit": fit})
+        write_result_files(folder, phase, fit)
         for stale in folder.glob(f"{CHECKPOINT_PREFIX}*"):  # of a whole run, interrupted
             stale.unlink()
         logger.info(

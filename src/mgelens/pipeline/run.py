@@ -265,6 +265,12 @@ def _write_outputs(
     products.write_model_fits(folder / MODEL_FILE, best, provenance)
     if phase.phase == "spix1":
         products.write_adapt_image(folder / ADAPT_IMAGE_FILE, best)
+    write_result_files(folder, phase, record)
+
+
+def write_result_files(folder: Path, phase: PhaseResult, record: dict) -> None:
+    """``samples.csv`` and, last, ``result.json`` with the ``max_likelihood_fit``
+    ``record`` of a phase, each written atomically."""
     with atomic_path(folder / SAMPLES_FILE) as temporary:
         phase.samples_table().to_csv(temporary, index=False, float_format="%.17g")
     write_json(folder / RESULT_FILE, {**phase.summary(), "max_likelihood_fit": record})
