@@ -3,15 +3,18 @@ the chain's jobs summed per phase, the sampler calls of the phase records (SP's 
 included where SP started from it), unmeasured (NA) jobs and missing phases making a
 chain incomplete, the sample's median, largest and projected time, and bad files named."""
 
+import hashlib
 import json
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pandas as pd
 import pytest
 
 from mgelens.chain_cost import JobCost, chain_seconds, cost_table, job_cost, sample_cost
+from mgelens.job_cost_record import COST_FILE, process_cost
 from mgelens.plot.chain_cost import cost_figure
 
 HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
@@ -54,7 +57,7 @@ def _lens(tmp_path, name="L1", jobs=tuple(JOBS), sp_start="search"):
 
 def test_each_phase_sums_its_jobs_and_sp_counts_its_start(tmp_path):
     paths = _lens(tmp_path)
-    assert job_cost(paths[0]) == JobCost("L1", "sp", "sp", 100.0, 95.0, 300.0, 29_440.0)
+    assert job_cost(paths[0]) == JobCost("L1", "sp", "sp", 100.0, 95.0, 300.0, 29_440.0, False)
     row = cost_table(paths).iloc[0]
     assert row["lens"] == "L1"
     assert row["light_cpu_s"] == pytest.approx(55.0 + 56.0)  # both candidates
@@ -63,9 +66,10 @@ def test_each_phase_sums_its_jobs_and_sp_counts_its_start(tmp_path):
     assert row["chain_wall_min"] == pytest.approx((100 + 40 + 50 + 60 + 61 + 200) / 60)
     assert row["max_rss_mb"] == 500.0
     assert row["complete"]
+    assert not row["cpu_exact"]  # no job recorded its own CPU time
     # jobs outside the chain (choose_light, simulate_mock) are not the chain's time
     assert chain_seconds(paths[0].parents[1]) == pytest.approx(100 + 40 + 50 + 60 + 61 + 200)
-    cpu = chain_seconds(paths[0].parents[1], "cpu_time")
+    cpu = chain_seconds(paths[0].parents[1], cpu=True)
     assert cpu == pytest.approx(row["chain_cpu_min"] * 60)
     assert np.isnan(chain_seconds(tmp_path / "nothing"))
 
@@ -104,7 +108,7 @@ def test_an_unmeasured_or_missing_phase_makes_the_chain_incomplete(tmp_path):
     assert list(table["complete"]) == [True, False, False]
     assert np.isnan(table.loc[1, "sp_cpu_s"])
     assert np.isnan(table.loc[1, "chain_cpu_min"])
-    assert np.isnan(chain_seconds(unmeasured[0].parents[1], "cpu_time"))
+    assert np.isnan(chain_seconds(unmeasured[0].parents[1], cpu=True))
     assert chain_seconds(unmeasured[0].parents[1]) == pytest.approx(3 + 40 + 50 + 60 + 61 + 200)
     assert table.loc[1, "max_rss_mb"] == 500.0
     assert np.isnan(table.loc[2, "mass_cpu_s"])
@@ -137,6 +141,56 @@ def test_a_broken_benchmark_file_is_named_with_the_fix(tmp_path, content, messag
     path.write_text(content)
     with pytest.raises(ValueError, match=rf"sp\.tsv.*{message}.*rerun its phase"):
         job_cost(path)
+
+
+def _cost_record(folder, job, cpu_s, result=None):
+    """``job``'s cost.json with ``cpu_s``, for ``result`` (default: its result.json)."""
+    result = (folder / job / "result.json").read_bytes() if result is None else result
+    record = {"cpu_s": cpu_s, "wall_s": cpu_s, "result_sha256": hashlib.sha256(result).hexdigest()}
+    (folder / job / COST_FILE).write_text(json.dumps(record))
+
+
+def test_a_jobs_own_cpu_record_replaces_the_sampled_time_only_where_it_is_its_results(
+    tmp_path,
+):
+    """A job's ``cost.json`` for its ``result.json`` gives its CPU seconds; one written
+    for another result (an earlier run's) does not; an unreadable one is named."""
+    paths = _lens(tmp_path)
+    folder = paths[0].parents[1]
+    _cost_record(folder, "sp", 123.5)
+    cost = job_cost(paths[0])
+    assert (cost.cpu_s, cost.wall_s, cost.cpu_exact) == (123.5, 100.0, True)
+    row = cost_table(paths).iloc[0]
+    assert row["sp_cpu_s"] == 123.5
+    assert not row["cpu_exact"]  # the other jobs have only Snakemake's samples
+    for job in tuple(JOBS)[1:]:
+        _cost_record(folder, job, JOBS[job][2] + 1.0)
+    row = cost_table(paths).iloc[0]
+    assert row["cpu_exact"]
+    assert row["chain_cpu_min"] == pytest.approx((123.5 + 39 + 48 + 55 + 56 + 190 + 5) / 60)
+    assert chain_seconds(folder, cpu=True) == pytest.approx(row["chain_cpu_min"] * 60)
+    _cost_record(folder, "sp", 123.5, result=b"an earlier run's result")
+    assert job_cost(paths[0]) == JobCost("L1", "sp", "sp", 100.0, 95.0, 300.0, 29_440.0, False)
+    (folder / "sp" / COST_FILE).write_text(json.dumps({"cpu_s": 1.0}))
+    with pytest.raises(ValueError, match=r"sp/cost\.json.*rerun the phase"):
+        job_cost(paths[0])
+
+
+def test_the_process_cost_counts_cpu_time_not_waiting():
+    """CPU seconds grow by the time a loop computes and not by the time the process
+    sleeps; wall seconds grow by both."""
+    started = time.perf_counter()
+    before = process_cost(started)
+    time.sleep(0.3)
+    slept = process_cost(started)
+    end = time.process_time() + 0.3
+    while time.process_time() < end:
+        pass
+    busy = process_cost(started)
+    assert slept["cpu_s"] - before["cpu_s"] < 0.1
+    assert slept["wall_s"] - before["wall_s"] >= 0.29
+    assert busy["cpu_s"] - slept["cpu_s"] == pytest.approx(0.3, abs=0.05)
+    assert busy["max_rss_mb"] > 10.0
 
 
 def test_a_broken_start_record_is_named(tmp_path):

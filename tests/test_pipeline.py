@@ -21,6 +21,7 @@ from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.isophotes import STATISTICS_SMA_RANGE, isophote_table
+from mgelens.job_cost_record import recorded_cpu_seconds
 from mgelens.mask import contaminant_regions_from_noise
 from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
 from mgelens.pipeline import (
@@ -1382,6 +1383,7 @@ def test_mass_mesh_jobs_pool_into_the_whole_phases_result(sersic_run, mock_dir):
     assert records[0] == records[1]
     assert [m["kmeans_seed"] for m in records[1]["settings"]["meshes"]] == [0, 1]
     assert not list(joined.glob("checkpoint-*"))
+    assert recorded_cpu_seconds(joined) > 0.0  # the pool job recorded its process's CPU
     # another seed, other settings, a missing mesh job, a changed input
     with pytest.raises(mesh_pool.MeshPoolError, match=r"sampled with seed 1, not 3"):
         mesh_pool.pool_meshes(sersic_run, settings, seed=3, folder_name="refused")

@@ -4,16 +4,20 @@ records.
 
 A phase job's benchmark file ``results/<lens>/benchmarks/<job>.tsv`` (Snakemake's
 columns: ``s`` wall-clock seconds, ``cpu_time`` CPU seconds, ``max_rss`` MB, …) sits
-beside its folder ``results/<lens>/<job>/`` with ``result.json`` (the sampler's
-``n_calls``). A chain's jobs are SP, SPix1, SPix2, its LIGHT job (``light`` where the
-sheet pins the model, else every candidate ``light_x6_point`` …) and MASS (``mass``, or
-its mesh jobs ``mass_mesh<k>`` and the job that pools them, ``mass_pool``)
+beside its folder ``results/<lens>/<job>/`` (the pool job's: ``mass/``) with
+``result.json`` (the sampler's ``n_calls``). A chain's jobs are SP, SPix1, SPix2, its
+LIGHT job (``light`` where the sheet pins the model, else every candidate
+``light_x6_point`` …) and MASS (``mass``, or its mesh jobs ``mass_mesh<k>`` and the job
+that pools them, ``mass_pool``)
 (:data:`CHAIN_PHASES`); the workflow passes exactly those (rule ``chain_cost``), so files
 left from another configuration do not count. A benchmark file records the last run of
 its job: a phase resumed after an interruption counts that run's time only, while its
-sampler's calls include the runs before (they are checkpointed). Snakemake samples a
-job's ``cpu_time`` (every 0.5 s for its first 15 s, then every 30 s), so it misses up to
-30 s of each job's last stretch: the CPU seconds are lower bounds, the wall seconds exact.
+sampler's calls include the runs before (they are checkpointed). A job's CPU seconds
+are those its process recorded in ``<job>/cost.json`` (:mod:`mgelens.job_cost_record`,
+exact); where the folder has no such record of its result (a job of an older version),
+the benchmark file's ``cpu_time``, which Snakemake samples (every 0.5 s for its first
+15 s, then every 30 s) and so misses up to 30 s of the job's last stretch: a lower bound.
+``cpu_exact`` says which. The wall seconds are the benchmark file's, exact.
 """
 
 import json
@@ -24,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from mgelens.job_cost_record import recorded_cpu_seconds
 from mgelens.pipeline.mesh_pool import POOL_JOB
 from mgelens.pipeline.sp_start import START_FILE
 from mgelens.search.results import RESULT_FILE
@@ -50,12 +55,16 @@ class JobCost:
     phase : str
         Its phase (:data:`CHAIN_PHASES`).
     wall_s, cpu_s : float
-        Wall-clock and CPU seconds (``s``, ``cpu_time``; NaN where Snakemake wrote NA).
+        Wall-clock seconds (``s``) and CPU seconds (the job's ``cost.json``, else
+        ``cpu_time``); NaN where Snakemake wrote NA and the job recorded none.
     max_rss_mb : float
         Peak resident memory (MB; NaN where Snakemake wrote NA).
     calls : float
         Likelihood calls of its sampler, and for SP of its start search; NaN where the
         phase's ``result.json`` is absent.
+    cpu_exact : bool
+        Whether ``cpu_s`` is the job's own record (exact) rather than Snakemake's sampled
+        ``cpu_time`` (a lower bound).
     """
 
     lens: str
@@ -65,6 +74,7 @@ class JobCost:
     cpu_s: float
     max_rss_mb: float
     calls: float
+    cpu_exact: bool
 
 
 def phase_of(job: str) -> str | None:
@@ -147,29 +157,29 @@ def job_cost(benchmark: Path) -> JobCost:
         )
     values = _benchmark(benchmark, BENCHMARK_COLUMNS)
     lens_folder = benchmark.parent.parent
+    # the pool job writes MASS's folder; every other job the folder of its name
+    folder = "mass" if benchmark.stem == POOL_JOB else benchmark.stem
+    recorded = recorded_cpu_seconds(lens_folder / folder)
     return JobCost(
         lens_folder.name,
         benchmark.stem,
         phase,
         float(values["s"].sum(min_count=1)),
-        float(values["cpu_time"].sum(min_count=1)),
+        float(values["cpu_time"].sum(min_count=1)) if recorded is None else recorded,
         float(values["max_rss"].max()),
         _calls(lens_folder, benchmark.stem),
+        recorded is not None,
     )
 
 
-def chain_seconds(lens_folder: Path, column: str = "s") -> float:
-    """Seconds of a lens's chain: ``column`` of the benchmark files (``s``, wall-clock, or
-    ``cpu_time``) summed over every file of a phase job in ``lens_folder/benchmarks/``
-    (other jobs left out); NaN with none, or where one of them is NA (a job shorter than
-    Snakemake's first sample). A job resumed after an interruption counts its last run."""
+def chain_seconds(lens_folder: Path, cpu: bool = False) -> float:
+    """Seconds of a lens's chain, wall-clock or (``cpu``) CPU (:func:`job_cost`), summed
+    over every phase job with a benchmark file in ``lens_folder/benchmarks/`` (other jobs
+    left out); NaN with none, or where one of them is unmeasured. A job resumed after an
+    interruption counts its last run."""
     files = sorted(Path(lens_folder, "benchmarks").glob("*.tsv"))
-    seconds = [
-        _benchmark(path, (column,))[column].sum(min_count=1)
-        for path in files
-        if phase_of(path.stem)
-    ]
-    return _total(seconds)
+    costs = [job_cost(path) for path in files if phase_of(path.stem)]
+    return _total([cost.cpu_s if cpu else cost.wall_s for cost in costs])
 
 
 COST_COLUMNS = (
@@ -180,12 +190,14 @@ COST_COLUMNS = (
     "chain_wall_min",
     "max_rss_mb",
     "complete",
+    "cpu_exact",
 )
 """Columns of :func:`cost_table`: per phase its CPU seconds and likelihood calls (a phase
 with several jobs, the LIGHT candidates, sums them; NaN for a phase without a job or with
 an unmeasured one), the chain's CPU and wall-clock minutes (NaN if a job's are
-unmeasured), the largest peak memory, and whether every phase has a job with its CPU time
-measured."""
+unmeasured), the largest peak memory, whether every phase has a job with its CPU time
+measured, and whether every job's CPU time is its own record (:attr:`JobCost.cpu_exact`)
+rather than Snakemake's sampled lower bound."""
 
 
 def _total(values: Sequence[float]) -> float:
@@ -205,6 +217,7 @@ def cost_row(lens: str, costs: Sequence[JobCost]) -> dict:
     memory = [cost.max_rss_mb for cost in costs if np.isfinite(cost.max_rss_mb)]
     row["max_rss_mb"] = max(memory, default=np.nan)
     row["complete"] = all(np.isfinite(row[f"{phase}_cpu_s"]) for phase in CHAIN_PHASES)
+    row["cpu_exact"] = all(cost.cpu_exact for cost in costs)
     return row
 
 

@@ -8,10 +8,13 @@ Example::
 Reads the Snakemake benchmark files of the chain's phase jobs
 (``results/<lens>/benchmarks/<job>.tsv``; rule ``chain_cost`` passes every lens's SP,
 SPix1, SPix2, LIGHT job or candidates and MASS) and each job's ``results/<lens>/<job>/``
-record for its likelihood calls, and writes
+record for its likelihood calls and the CPU seconds the job recorded (``cost.json``),
+and writes
 
 * ``--out``: one row per lens, CPU seconds and likelihood calls per phase, the chain's
-  CPU and wall-clock minutes, peak memory, and whether every phase was measured;
+  CPU and wall-clock minutes, peak memory, whether every phase was measured, and whether
+  every CPU time is a job's own record (``cpu_exact``; else some are Snakemake's sampled
+  lower bound);
 * ``--figure``: CPU minutes per lens split by phase, with the sample's median, largest and
   total in the title and the whole sample's time on ``--cores`` cores at the median.
 

@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
             record["lens"]: path.parent for record, path in zip(records, args.records, strict=True)
         }
         seconds = {lens: chain_seconds(folder) for lens, folder in folders.items()}
-        cpu = {lens: chain_seconds(folder, "cpu_time") for lens, folder in folders.items()}
+        cpu = {lens: chain_seconds(folder, cpu=True) for lens, folder in folders.items()}
     except (OSError, ValueError, KeyError) as exc:
         logger.error("cannot read the recovery records: %s", exc)
         return 1

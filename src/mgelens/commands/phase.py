@@ -9,7 +9,8 @@ Example::
 
 The phase reads the imaging of ``--lens-dir`` and the earlier phases' folders under
 ``--results``, and writes ``<results>/<phase>/`` (result.json, samples.csv, model.fits,
-phase.log; spix1 also adapt_image.fits). Settings: the ``--profile`` defaults ("quick"
+phase.log, cost.json with the job's CPU seconds (:mod:`mgelens.job_cost_record`); spix1
+also adapt_image.fits). Settings: the ``--profile`` defaults ("quick"
 unless the ``slam:`` settings say otherwise), then the ``slam:`` section of ``--config``,
 then ``--slam`` (the same content as JSON; the workflow passes its config's section this
 way). What is set per lens (:class:`~mgelens.pipeline.settings.LensSpec`, the sample
@@ -24,11 +25,13 @@ jobs, ``--mesh k`` for each, then ``--pool-meshes`` (:mod:`mgelens.pipeline.mesh
 import argparse
 import json
 import logging
+import time
 from pathlib import Path
 
 from mgelens import threads
 from mgelens.commands import make_output_folders
 from mgelens.imaging_input import ImagingError
+from mgelens.job_cost_record import write_job_cost
 from mgelens.mask import read_contaminant_circles
 from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import records
@@ -150,6 +153,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    started = time.perf_counter()
     try:
         threads.limit_threads(args.threads)
         keep_freed_memory()
@@ -167,7 +171,9 @@ def run(args: argparse.Namespace) -> int:
                 raise ValueError(
                     "--pool-meshes pools MASS's mesh jobs: use it with phase mass, no --mesh"
                 )
-            pool_meshes(args.results, settings, args.seed, args.folder or "mass")
+            folder = args.folder or "mass"
+            pool_meshes(args.results, settings, args.seed, folder)
+            write_job_cost(args.results / folder, started)
             return 0
         folder = args.folder or (args.phase if args.mesh is None else mesh_folder(args.mesh))
         make_output_folders(args.results / folder / RESULT_FILE)
@@ -182,6 +188,7 @@ def run(args: argparse.Namespace) -> int:
             bound_by=None if args.bound_by is None else (args.bound_by, args.bound_threshold),
             mesh=args.mesh,
         )
+        write_job_cost(args.results / folder, started)
     except (SettingsError, ImagingError, records.PhaseInputError, ValueError, OSError) as error:
         logger.error("phase %s: %s", args.phase, error)
         return 1
