@@ -12,6 +12,7 @@ from mgelens.pipeline.parameters import lens_parameter, limits_of, width_of
 from mgelens.search.priors import (
     Gaussian,
     LogUniform,
+    PriorTransform,
     TruncatedGaussian,
     Uniform,
     WidthModifier,
@@ -237,3 +238,31 @@ def test_passed_prior_rejects_bad_input():
         passed_prior("mass.ell_comps_1", 1.5, 0.1, ABSOLUTE, (-1.0, 1.0))
     with pytest.raises(ValueError, match="previous_sigma"):
         passed_prior("mass.slope", 2.0, -0.1, ABSOLUTE)
+
+
+def test_the_batched_transform_gives_each_priors_own_numbers_to_the_bit():
+    """:class:`PriorTransform` evaluates the truncated Gaussians together; every value,
+    at the ends of the cube and far in the tails included, must be what each prior's own
+    transform gives, bit for bit (a sampler's path depends on them), for one vector and
+    for a batch."""
+    priors = (
+        TruncatedGaussian(1.2, 0.3, 0.0, math.inf),
+        Uniform(-1.0, 2.0),
+        TruncatedGaussian(0.0, 0.05, -1.0, 1.0),
+        LogUniform(1e-3, 10.0),
+        TruncatedGaussian(2.0, 0.1, 1.2, 2.8),
+        Gaussian(0.5, 2.0),
+        TruncatedGaussian(-3.0, 1e-3, -math.inf, math.inf),
+        TruncatedGaussian(5.0, 0.2, 0.0, 4.0),  # mean beyond the upper limit
+    )
+    batch = PriorTransform(priors)
+    rng = np.random.default_rng(7)
+    u = rng.uniform(size=(500, len(priors)))
+    u[0], u[1], u[2] = 0.0, 1.0, 1e-300
+    u[3], u[4] = 1.0 - 1e-16, 0.5
+    expected = np.column_stack([prior.transform(u[:, i]) for i, prior in enumerate(priors)])
+    np.testing.assert_array_equal(batch.transform(u), expected)
+    for row in u[:20]:
+        single = np.array([float(prior.transform(v)) for prior, v in zip(priors, row, strict=True)])
+        np.testing.assert_array_equal(batch.transform(row), single)
+    assert PriorTransform(()).transform(np.empty(0)).shape == (0,)

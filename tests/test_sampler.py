@@ -370,13 +370,13 @@ def test_nautilus_keeps_three_live_points_per_free_parameter():
 NAUTILUS = SamplerSettings(
     method="nautilus", n_live=100, n_networks=1, n_eff=200, progress_every=1e9, checkpoint_every=0
 )
-"""A small nautilus run copying its working file onto the checkpoint every second."""
+"""A small nautilus run writing its checkpoint every second."""
 
 
 def interrupted_nautilus(tmp_path, reference) -> Path:
     """The checkpoint of a nautilus run of the Gaussian killed past half its calls."""
     checkpoint = tmp_path / "sampler.pickle"
-    written = checkpoint.with_suffix(".h5")  # the checkpoint copy of nautilus's file
+    written = checkpoint.with_suffix(".h5")  # nautilus's checkpoint
     stop = GaussianLikelihood(stop_after=reference.n_calls // 2, stop_once_exists=written)
     with pytest.raises(Interrupted):
         run_nested(stop, SPACE, NAUTILUS, checkpoint, seed=4, log=lambda _: None)
@@ -405,23 +405,40 @@ def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
         run_nested(failing_likelihood, SPACE, settings, checkpoint, 4, lambda _: None)
 
 
-def test_nautilus_resumes_from_its_checkpoint_when_killed_while_writing(tmp_path):
-    """Nautilus rewrites its HDF5 file in place; a run killed in a write leaves that file
-    without the state a resume needs (a MASS run on M2 stopped in a write left one without
-    its random state). The checkpoint is a copy taken between writes, so the resume starts from it
-    and reaches the uninterrupted run."""
+def test_nautilus_resumes_from_its_checkpoint_when_killed_while_writing(tmp_path, monkeypatch):
+    """The checkpoint is written whole into a temporary file and renamed onto the old one
+    (nautilus, left to itself, rewrote its file in place: a MASS run on M2 stopped in a
+    write left one without its random state). A run killed in the middle of a checkpoint
+    write keeps the previous checkpoint, and its resume reaches the uninterrupted run."""
+    import nautilus
+
     reference = run_nested(GaussianLikelihood(), SPACE, NAUTILUS, seed=4, log=lambda _: None)
-    checkpoint = interrupted_nautilus(tmp_path, reference)
-    working = tmp_path / "sampler-working.h5"
-    with h5py.File(working, "a") as stream:  # as a kill between the unlink and the state
-        del stream["sampler"].attrs["rng_state"]
+    checkpoint = tmp_path / "sampler.pickle"
+    written = checkpoint.with_suffix(".h5")
+    original = nautilus.Sampler.write
+
+    def killed_in_second_write(sampler, filepath, overwrite=False):
+        if written.exists():  # the first checkpoint is in place: die half way through
+            with h5py.File(filepath, "w") as stream:
+                stream.create_group("sampler").attrs["n_dim"] = 2
+            raise Interrupted
+        original(sampler, filepath, overwrite)
+
+    monkeypatch.setattr(nautilus.Sampler, "write", killed_in_second_write)
+    with pytest.raises(Interrupted):
+        run_nested(GaussianLikelihood(), SPACE, NAUTILUS, checkpoint, seed=4, log=lambda _: None)
+    monkeypatch.setattr(nautilus.Sampler, "write", original)
+    with h5py.File(written, "r") as stream:  # the first checkpoint, whole
+        assert "rng_state" in stream["sampler"].attrs
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "sampler.fingerprint.json",
+        "sampler.h5",
+    ]  # no half-written file left beside it
     likelihood = GaussianLikelihood()
     resumed = run_nested(likelihood, SPACE, NAUTILUS, checkpoint, 4, lambda _: None)
     assert 0 < likelihood.calls < reference.n_calls
     np.testing.assert_array_equal(resumed.samples, reference.samples)
     assert resumed.log_evidence == reference.log_evidence
-    with h5py.File(checkpoint.with_suffix(".h5"), "r") as stream:
-        assert "rng_state" in stream["sampler"].attrs
 
 
 def test_nautilus_networks_keep_loss_curves_its_checkpoint_can_hold(tmp_path):

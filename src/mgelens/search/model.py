@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from mgelens.geometry import axis_ratio_and_angle_from
-from mgelens.search.priors import Prior, prior_from_dict
+from mgelens.search.priors import Prior, PriorTransform, prior_from_dict
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 
@@ -109,6 +109,7 @@ class ParameterSpace:
 
     parameters: tuple[Parameter, ...] = ()
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
+    _transform: PriorTransform = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         parameters = tuple(self.parameters)
@@ -119,6 +120,8 @@ class ParameterSpace:
             duplicates = sorted({n for n in names if names.count(n) > 1})
             raise ValueError(f"duplicate parameter names: {duplicates}")
         object.__setattr__(self, "_index", index)
+        free = tuple(p.prior for p in parameters if p.prior is not None)
+        object.__setattr__(self, "_transform", PriorTransform(free))
         for p in parameters:
             if p.tied_to is None:
                 continue
@@ -176,12 +179,10 @@ class ParameterSpace:
             Parameter values in the order of :attr:`free_names`.
         """
         u = np.asarray(u, dtype=float)
-        if u.shape[-1:] != (self.n_free,):
-            raise ValueError(f"expected unit-cube vectors of length {self.n_free}, got {u.shape}")
-        x = np.empty_like(u)
-        for i, prior in enumerate(self.priors):
-            x[..., i] = prior.transform(u[..., i])
-        return x
+        n_free = len(self._transform.priors)
+        if u.shape[-1:] != (n_free,):
+            raise ValueError(f"expected unit-cube vectors of length {n_free}, got {u.shape}")
+        return self._transform.transform(u)
 
     def unit_cube(self, x: np.ndarray) -> np.ndarray:
         """Unit-cube coordinates of the free-parameter vector ``x``, the inverse of

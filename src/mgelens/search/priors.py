@@ -181,21 +181,14 @@ class TruncatedGaussian:
 
     def transform(self, u: np.ndarray | float) -> np.ndarray:
         """Value at unit-cube coordinate ``u`` (u = 0 → lower, u = 1 → upper)."""
-        u = np.asarray(u, dtype=float)
+        return _truncated_gaussian_quantile(np.asarray(u, dtype=float), *self._quantile_constants())
+
+    def _quantile_constants(self) -> tuple[float, ...]:
+        """What :func:`_truncated_gaussian_quantile` needs besides u: mean, sigma, lower,
+        upper, ln Φ(a), ln Φ(b), ln Φ(−a), ln Φ(−b)."""
         a, b = self._standard_limits
-        with np.errstate(divide="ignore", invalid="ignore"):
-            log_u, log_complement = np.log(u), np.log1p(-u)
-            log_cdf = np.logaddexp(
-                log_complement + special.log_ndtr(a), log_u + special.log_ndtr(b)
-            )
-            log_sf = np.logaddexp(
-                log_complement + special.log_ndtr(-a), log_u + special.log_ndtr(-b)
-            )
-            z = np.where(
-                log_cdf < math.log(0.5), special.ndtri_exp(log_cdf), -special.ndtri_exp(log_sf)
-            )
-        x = np.clip(self.mean + self.sigma * z, self.lower, self.upper)
-        return np.where(u <= 0.0, self.lower, np.where(u >= 1.0, self.upper, x))
+        logs = special.log_ndtr(np.array([a, b, -a, -b]))
+        return (self.mean, self.sigma, self.lower, self.upper, *(float(v) for v in logs))
 
     def cdf(self, x: np.ndarray | float) -> np.ndarray:
         """Unit-cube coordinate of ``x``: [Φ(z) − Φ(a)] / [Φ(b) − Φ(a)] for z = (x − mean)/sigma,
@@ -239,6 +232,59 @@ class TruncatedGaussian:
 
 
 Prior = Uniform | LogUniform | Gaussian | TruncatedGaussian
+
+
+def _truncated_gaussian_quantile(
+    u, mean, sigma, lower, upper, log_cdf_a, log_cdf_b, log_sf_a, log_sf_b
+) -> np.ndarray:
+    """:meth:`TruncatedGaussian.transform` of ``u`` elementwise, every other argument a
+    scalar or an array broadcasting with ``u`` (the constants of
+    :meth:`TruncatedGaussian._quantile_constants`)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_u, log_complement = np.log(u), np.log1p(-u)
+        log_cdf = np.logaddexp(log_complement + log_cdf_a, log_u + log_cdf_b)
+        log_sf = np.logaddexp(log_complement + log_sf_a, log_u + log_sf_b)
+        z = np.where(
+            log_cdf < math.log(0.5), special.ndtri_exp(log_cdf), -special.ndtri_exp(log_sf)
+        )
+    x = np.clip(mean + sigma * z, lower, upper)
+    return np.where(u <= 0.0, lower, np.where(u >= 1.0, upper, x))
+
+
+class PriorTransform:
+    """The unit-cube map of several priors at once: ``transform(u)`` with u of shape
+    (..., n) gives each prior's :meth:`transform` of its column, the same numbers (the
+    same elementwise operations), but the truncated Gaussians, which passed priors make
+    the most common, in one vectorised evaluation instead of one per prior: a sampler
+    calls this once per likelihood call, and SP's 17 priors one by one cost 0.6 ms a call.
+    """
+
+    def __init__(self, priors: tuple[Prior, ...]):
+        self.priors = tuple(priors)
+        self._truncated = np.array(
+            [i for i, prior in enumerate(self.priors) if isinstance(prior, TruncatedGaussian)],
+            dtype=int,
+        )
+        self._others = [
+            (i, prior)
+            for i, prior in enumerate(self.priors)
+            if not isinstance(prior, TruncatedGaussian)
+        ]
+        constants = [self.priors[i]._quantile_constants() for i in self._truncated]
+        self._constants = tuple(
+            np.array(column, dtype=float) for column in zip(*constants, strict=True)
+        )
+
+    def transform(self, u: np.ndarray) -> np.ndarray:
+        """Parameter values of unit-cube coordinates ``u`` (shape (..., n), n priors)."""
+        x = np.empty_like(u)
+        if self._truncated.size:
+            x[..., self._truncated] = _truncated_gaussian_quantile(
+                u[..., self._truncated], *self._constants
+            )
+        for i, prior in self._others:
+            x[..., i] = prior.transform(u[..., i])
+        return x
 
 
 def prior_from_dict(content: dict) -> Prior:
