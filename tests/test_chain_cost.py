@@ -165,8 +165,11 @@ def test_a_jobs_own_cpu_record_replaces_the_sampled_time_only_where_it_is_its_re
     assert not row["cpu_exact"]  # the other jobs have only Snakemake's samples
     for job in tuple(JOBS)[1:]:
         _cost_record(folder, job, JOBS[job][2] + 1.0)
-    row = cost_table(paths).iloc[0]
+    table = cost_table(paths)
+    row = table.iloc[0]
     assert row["cpu_exact"]
+    (ax,) = cost_figure(table, sample_cost(table, cores=2)).axes
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["L1"]  # exact: no mark
     assert row["chain_cpu_min"] == pytest.approx((123.5 + 39 + 48 + 55 + 56 + 190 + 5) / 60)
     assert chain_seconds(folder, cpu=True) == pytest.approx(row["chain_cpu_min"] * 60)
     _cost_record(folder, "sp", 123.5, result=b"an earlier run's result")
@@ -207,7 +210,8 @@ def test_the_figure_has_one_bar_per_lens_in_core_minutes(tmp_path):
     figure = cost_figure(table, sample_cost(table, cores=2))
     (ax,) = figure.axes
     assert ax.get_xlabel() == "CPU time of the SLaM chain (core-minutes)"
-    assert [t.get_text() for t in ax.get_yticklabels()] == ["A", "C (incomplete)"]
+    # no job of either recorded its own CPU time: Snakemake's sampled lower bounds
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["A (CPU ≥)", "C (incomplete) (CPU ≥)"]
     widths = [patch.get_width() for patch in ax.patches]
     assert sum(widths) == pytest.approx(table["chain_cpu_min"].sum())
     assert "1 complete chains of 2" in ax.get_title()

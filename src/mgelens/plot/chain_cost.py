@@ -14,7 +14,9 @@ PHASE_LABELS = {"sp": "SP", "spix1": "SPix1", "spix2": "SPix2", "light": "LIGHT 
 def cost_figure(table: pd.DataFrame, sample: dict) -> Figure:
     """Horizontal bars of :func:`~mgelens.chain_cost.cost_table` (CPU minutes per phase,
     stacked; a phase without a benchmark file adds nothing and its lens is marked
-    "incomplete") with :func:`~mgelens.chain_cost.sample_cost`'s figures in the title."""
+    "incomplete"; a lens with a job whose CPU time is Snakemake's sampled lower bound, not
+    the job's own record, is marked "CPU ≥") with
+    :func:`~mgelens.chain_cost.sample_cost`'s figures in the title."""
     height = 1.6 + 0.28 * max(len(table), 1)
     figure = Figure(figsize=(10.0, height), layout="constrained")
     ax = figure.add_subplot()
@@ -26,8 +28,13 @@ def cost_figure(table: pd.DataFrame, sample: dict) -> Figure:
         ax.barh(y, minutes, left=left, label=PHASE_LABELS[phase])
         left += minutes
     labels = [
-        lens if complete else f"{lens} (incomplete)"
-        for lens, complete in zip(table["lens"], table["complete"].astype(bool), strict=True)
+        lens + ("" if complete else " (incomplete)") + ("" if exact else " (CPU ≥)")
+        for lens, complete, exact in zip(
+            table["lens"],
+            table["complete"].astype(bool),
+            table["cpu_exact"].astype(bool),
+            strict=True,
+        )
     ]
     ax.set_yticks(y, labels, fontsize="small")
     ax.set_xlabel("CPU time of the SLaM chain (core-minutes)")
