@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from mgelens.chain_cost import JobCost, chain_seconds, cost_table, job_cost, sample_cost
-from mgelens.job_cost_record import COST_FILE, process_cost
+from mgelens.pipeline.job_cost import COST_FILE, process_cost
 from mgelens.plot.chain_cost import cost_figure
 
 HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"

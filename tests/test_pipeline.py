@@ -21,7 +21,6 @@ from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
 from mgelens.isophotes import STATISTICS_SMA_RANGE, isophote_table
-from mgelens.job_cost_record import recorded_cpu_seconds
 from mgelens.mask import contaminant_regions_from_noise
 from mgelens.mass import EPL, SIE, ExternalShear, ray_trace
 from mgelens.pipeline import (
@@ -35,6 +34,7 @@ from mgelens.pipeline import (
     run,
     sp_start,
 )
+from mgelens.pipeline.job_cost import recorded_cpu_seconds
 from mgelens.pipeline.phases import light as light_phase
 from mgelens.pipeline.phases import mass as mass_phase
 from mgelens.pipeline.phases import sp as sp_phase

@@ -787,8 +787,9 @@ def test_default_target_runs_the_whole_dag_and_reruns_one_phase(tmp_path):
             benchmark = pd.read_csv(lens / "benchmarks" / f"{job}.tsv", sep="\t").iloc[0]
             folder = lens / ("mass" if job == "mass_pool" else job)
             cpu = json.loads((folder / "cost.json").read_text())["cpu_s"]
-            # Snakemake samples the CPU time (a lower bound); one thread cannot exceed wall
-            assert benchmark["cpu_time"] - 0.5 <= cpu <= 1.05 * benchmark["s"] + 1.0
+            # Snakemake samples the CPU time, to the process's exit (the record is written
+            # before the interpreter shuts down, about a second); one thread cannot exceed wall
+            assert benchmark["cpu_time"] - 1.5 <= cpu <= 1.05 * benchmark["s"] + 1.0
             recorded += cpu
         assert cost[f"{phase}_cpu_s"] == pytest.approx(recorded)
     n_calls = json.loads((lens / "mass" / "result.json").read_text())["sampler"]["n_calls"]

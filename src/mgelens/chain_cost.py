@@ -13,7 +13,7 @@ that pools them, ``mass_pool``)
 left from another configuration do not count. A benchmark file records the last run of
 its job: a phase resumed after an interruption counts that run's time only, while its
 sampler's calls include the runs before (they are checkpointed). A job's CPU seconds
-are those its process recorded in ``<job>/cost.json`` (:mod:`mgelens.job_cost_record`,
+are those its process recorded in ``<job>/cost.json`` (:mod:`mgelens.pipeline.job_cost`,
 exact); where the folder has no such record of its result (a job of an older version),
 the benchmark file's ``cpu_time``, which Snakemake samples (every 0.5 s for its first
 15 s, then every 30 s) and so misses up to 30 s of the job's last stretch: a lower bound.
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mgelens.job_cost_record import recorded_cpu_seconds
+from mgelens.pipeline.job_cost import recorded_cpu_seconds
 from mgelens.pipeline.mesh_pool import POOL_JOB
 from mgelens.pipeline.sp_start import START_FILE
 from mgelens.search.results import RESULT_FILE

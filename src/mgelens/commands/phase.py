@@ -9,7 +9,7 @@ Example::
 
 The phase reads the imaging of ``--lens-dir`` and the earlier phases' folders under
 ``--results``, and writes ``<results>/<phase>/`` (result.json, samples.csv, model.fits,
-phase.log, cost.json with the job's CPU seconds (:mod:`mgelens.job_cost_record`); spix1
+phase.log, cost.json with the job's CPU seconds (:mod:`mgelens.pipeline.job_cost`); spix1
 also adapt_image.fits). Settings: the ``--profile`` defaults ("quick"
 unless the ``slam:`` settings say otherwise), then the ``slam:`` section of ``--config``,
 then ``--slam`` (the same content as JSON; the workflow passes its config's section this
@@ -31,10 +31,10 @@ from pathlib import Path
 from mgelens import threads
 from mgelens.commands import make_output_folders
 from mgelens.imaging_input import ImagingError
-from mgelens.job_cost_record import write_job_cost
 from mgelens.mask import read_contaminant_circles
 from mgelens.memory import keep_freed_memory
 from mgelens.pipeline import records
+from mgelens.pipeline.job_cost import write_job_cost
 from mgelens.pipeline.mesh_pool import pool_meshes
 from mgelens.pipeline.model_choice import DEFAULT_THRESHOLD
 from mgelens.pipeline.run import mesh_folder, run_phase

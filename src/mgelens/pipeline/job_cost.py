@@ -5,7 +5,8 @@ CPU time (every 0.5 s for the first 15 s, then every 30 s), so their ``cpu_time`
 to 30 s of each job's last stretch. A phase job (``mgelens phase``) therefore writes, after
 its result, ``cost.json`` into its folder: the process's CPU seconds from the kernel's
 accounting (``getrusage``: user + system time of every thread since the process started,
-numba's threads included), its wall-clock seconds from the command's start, its peak
+numba's threads included, and of the child processes it waited for: a likelihood pool's
+workers), its wall-clock seconds from the command's start, its peak
 resident memory, and the SHA-256 of the ``result.json`` it wrote. It records that run
 only: a phase resumed from its checkpoint counts the run that finished it, as its
 benchmark file does.
@@ -30,12 +31,14 @@ COST_FILE = "cost.json"
 
 
 def process_cost(started: float) -> dict:
-    """This process's cost so far: ``cpu_s`` (user + system CPU seconds of all its threads),
-    ``wall_s`` (seconds since ``started``, a :func:`time.perf_counter` value) and
-    ``max_rss_mb`` (peak resident memory, MB of 2²⁰ bytes; Linux reports kB)."""
+    """This process's cost so far: ``cpu_s`` (user + system CPU seconds of all its threads
+    and of its terminated, waited-for children), ``wall_s`` (seconds since ``started``, a
+    :func:`time.perf_counter` value) and ``max_rss_mb`` (its own peak resident memory, MB
+    of 2²⁰ bytes; Linux reports kB)."""
     usage = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
     return {
-        "cpu_s": usage.ru_utime + usage.ru_stime,
+        "cpu_s": usage.ru_utime + usage.ru_stime + children.ru_utime + children.ru_stime,
         "wall_s": time.perf_counter() - started,
         "max_rss_mb": usage.ru_maxrss / 1024.0,
     }
