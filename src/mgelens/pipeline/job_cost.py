@@ -17,14 +17,13 @@ belongs to the folder's result: a ``cost.json`` whose digest is not that of the 
 outputs after it ends.)
 """
 
-import hashlib
 import json
 import resource
 import time
 from pathlib import Path
 
 from mgelens.atomic import write_json
-from mgelens.search.results import RESULT_FILE
+from mgelens.search.results import RESULT_FILE, file_sha256
 
 COST_FILE = "cost.json"
 """The record's name in the job's folder (``results/<lens>/<job>/``)."""
@@ -44,15 +43,11 @@ def process_cost(started: float) -> dict:
     }
 
 
-def _digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def write_job_cost(folder: Path, started: float) -> None:
     """Write :func:`process_cost` and the digest of ``folder/result.json``, which the job
     has written, to ``folder/cost.json`` (atomically)."""
     folder = Path(folder)
-    record = {**process_cost(started), "result_sha256": _digest(folder / RESULT_FILE)}
+    record = {**process_cost(started), "result_sha256": file_sha256(folder / RESULT_FILE)}
     write_json(folder / COST_FILE, record)
 
 
@@ -76,4 +71,4 @@ def recorded_cpu_seconds(folder: Path) -> float | None:
             f"{path}: no CPU seconds and result digest to read ({error!r}); delete it (the "
             "chain cost then takes the benchmark file's sampled CPU time) or rerun the phase"
         ) from error
-    return seconds if digest == _digest(result) else None
+    return seconds if digest == file_sha256(result) else None

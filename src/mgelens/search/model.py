@@ -157,12 +157,12 @@ class ParameterSpace:
 
     @property
     def n_free(self) -> int:
-        return len(self.free_names)
+        return len(self.priors)
 
     @property
     def priors(self) -> tuple[Prior, ...]:
         """Priors of the free parameters, in vector order."""
-        return tuple(p.prior for p in self.parameters if p.prior is not None)
+        return self._transform.priors
 
     # -- sampling ----------------------------------------------------------------------
     def prior_transform(self, u: np.ndarray) -> np.ndarray:
@@ -179,9 +179,8 @@ class ParameterSpace:
             Parameter values in the order of :attr:`free_names`.
         """
         u = np.asarray(u, dtype=float)
-        n_free = len(self._transform.priors)
-        if u.shape[-1:] != (n_free,):
-            raise ValueError(f"expected unit-cube vectors of length {n_free}, got {u.shape}")
+        if u.shape[-1:] != (self.n_free,):
+            raise ValueError(f"expected unit-cube vectors of length {self.n_free}, got {u.shape}")
         return self._transform.transform(u)
 
     def unit_cube(self, x: np.ndarray) -> np.ndarray:

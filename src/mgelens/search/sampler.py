@@ -46,10 +46,8 @@ import contextlib
 import json
 import logging
 import math
-import os
 import time
 import traceback
-import uuid
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import replace
@@ -485,12 +483,8 @@ def _write_nautilus_checkpoint(sampler, checkpoint: Path) -> None:
     random state). The sampler therefore runs without a file, and this writes its state
     between ``Sampler.run`` calls, where it is consistent.
     """
-    temporary = checkpoint.with_name(f".{checkpoint.stem}.{uuid.uuid4().hex}.h5")
-    try:
+    with atomic_path(checkpoint, suffix=".h5") as temporary:
         sampler.write(temporary, overwrite=True)
-        os.replace(temporary, checkpoint)
-    finally:
-        temporary.unlink(missing_ok=True)
 
 
 NAUTILUS_LIVE_PER_PARAMETER = 3
