@@ -21,7 +21,9 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from numba import prange
+from llvmlite import binding
+from numba import prange, types
+from numba.extending import get_cython_function_address
 from scipy import sparse
 from scipy.linalg import blas
 
@@ -30,6 +32,13 @@ from mgelens.convolve import separable_terms
 from mgelens.threads import single_threaded_blas
 
 TILE_SIZE = 8
+
+# scipy's BLAS dsyrk under a symbol name that compiled kernels link by name, so that
+# they stay cacheable (a ctypes function pointer would be a dynamic global).
+binding.add_symbol(
+    "mgelens_dsyrk", get_cython_function_address("scipy.linalg.cython_blas", "dsyrk")
+)
+_DSYRK = types.ExternalFunction("mgelens_dsyrk", types.void(*([types.voidptr] * 10)))
 
 STENCIL_COST_RATIO = 5.0
 """A tile's rows of G cost about k_y k_x scattered additions per output pixel and mapping
@@ -410,6 +419,31 @@ def _stencil_rows(rows, cols, slim_index, psf, f_indptr, f_indices, f_values, po
     return g_t.T.copy()
 
 
+@njit
+def _gram_upper(a):
+    """The upper triangle of aᵀa (n × n, C order; the strict lower triangle zero) for a
+    C-ordered (k, n) array ``a``: BLAS dsyrk, half the multiply-adds of a general product
+    (a in C order is aᵀ to Fortran, so its 'lower' triangle of aᵀa is this upper one)."""
+    k, n = a.shape
+    out = np.zeros((n, n))
+    flags = np.array([ord("L"), ord("N")], dtype=np.uint8)
+    sizes = np.array([n, k, n, n], dtype=np.int32)  # n, k, lda, ldc
+    scalars = np.array([1.0, 0.0])  # alpha, beta
+    _DSYRK(
+        flags[0:].ctypes.data,
+        flags[1:].ctypes.data,
+        sizes[0:].ctypes.data,
+        sizes[1:].ctypes.data,
+        scalars[0:].ctypes.data,
+        a.ctypes.data,
+        sizes[2:].ctypes.data,
+        scalars[1:].ctypes.data,
+        out.ctypes.data,
+        sizes[3:].ctypes.data,
+    )
+    return out
+
+
 # Kept whole: one prange loop over chunks, whose steps share each chunk's scratch and partial sums.
 @njit(parallel=True)
 def _tile_curvature(
@@ -505,15 +539,12 @@ def _tile_curvature(
                     f_values,
                     position,
                 )
-            # numba's np.dot reaches BLAS only for C-contiguous operands: build gᵀ explicitly
-            g_t = np.empty((n_union, n_out))
-            wg = np.empty_like(g)
+            # √w_i g_i, so that the block Gᵀ W G is one symmetric rank-k update
             for i in range(n_out):
-                wi = inverse_variance[tile_pixels[start + i]]
+                scale = np.sqrt(inverse_variance[tile_pixels[start + i]])
                 for j in range(n_union):
-                    g_t[j, i] = g[i, j]
-                    wg[i, j] = wi * g[i, j]
-            block = np.dot(g_t, wg)
+                    g[i, j] *= scale
+            block = _gram_upper(g)
             for x in range(n_union):
                 row = parts_ss[c, union[x]]
                 for y in range(x, n_union):
@@ -521,8 +552,9 @@ def _tile_curvature(
             if n_light > 0:
                 light_t = np.empty((n_light, n_out))
                 for i in range(n_out):
-                    light_t[:, i] = light[tile_pixels[start + i]]
-                block_ls = np.dot(light_t, wg)
+                    scale = np.sqrt(inverse_variance[tile_pixels[start + i]])
+                    light_t[:, i] = scale * light[tile_pixels[start + i]]
+                block_ls = np.dot(light_t, g)
                 for k in range(n_light):
                     for y in range(n_union):
                         parts_ls[c, k, union[y]] += block_ls[k, y]
