@@ -99,7 +99,7 @@ def test_curvature_and_data_vector_equal_dense_products(tile_size, kernel):
     f_ls = expected[:4, 4:]
     assert np.allclose(weighted_blurred.lens_source(dense), f_ls, rtol=1e-12, atol=1e-12)
     threads = numba.get_num_threads()
-    try:  # the pass's per-thread partial sums over blocks of rows add up to the same
+    try:  # threads that take the source pixels in parts give the same
         numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
         split = weighted_blurred.lens_source(dense)
     finally:

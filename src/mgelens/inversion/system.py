@@ -153,8 +153,8 @@ class WeightedBlurredMapping:
     Attributes
     ----------
     indptr, indices, values : ndarray
-        W B f (N_I × n_source) in compressed-row form, sorted indices, int64 index arrays
-        as the compiled pass takes them: the pass reads each row of L once.
+        W B f (N_I × n_source) in compressed-column form (one column per source pixel,
+        its image rows ascending), int64 index arrays as the compiled pass takes them.
     n_source : int
     """
 
@@ -168,7 +168,7 @@ class WeightedBlurredMapping:
         cls, blurred_mapping: sparse.spmatrix, inverse_variance: np.ndarray
     ) -> "WeightedBlurredMapping":
         """From B f (N_I, n_source) and the w_i (N_I,)."""
-        matrix = sparse.csr_matrix(sparse.diags(inverse_variance) @ blurred_mapping)
+        matrix = sparse.csc_matrix(sparse.diags(inverse_variance) @ blurred_mapping)
         matrix.sort_indices()
         return cls(
             matrix.indptr.astype(np.int64),
@@ -186,36 +186,42 @@ class WeightedBlurredMapping:
 
     def lens_source(self, dense: np.ndarray) -> np.ndarray:
         """F_LS = Lᵀ W B f (n_dense, n_source) of dense columns L (N_I, n_dense)."""
-        partial = _transposed_sparse_product(
-            self.indptr,
-            self.indices,
-            self.values,
-            np.ascontiguousarray(dense),
-            self.n_source,
-            numba.get_num_threads(),
-        )
-        return partial.sum(axis=0).T
+        return _column_sparse_product(
+            self.indptr, self.indices, self.values, np.ascontiguousarray(dense), ROW_BLOCK
+        ).T
+
+
+ROW_BLOCK = 256
+"""Image rows of L per pass of :func:`_column_sparse_product`: 256 rows of 190 lens-light
+columns (390 kB) stay in a core's L2 cache while every source pixel's non-zeros in them
+are summed (slacs1103+5322's LIGHT at 1,000 source pixels: 22 ms a call against 27 ms for
+one pass over the rows of the compressed-row form, which scatters into all of F_LS)."""
 
 
 @njit(parallel=True, fastmath=True)
-def _transposed_sparse_product(indptr, indices, values, dense, n_cols, n_parts):
-    """Aᵀ dense for a CSR matrix A (n_rows × ``n_cols``), as ``n_parts`` partial sums
-    (n_parts, n_cols, n_dense) over contiguous blocks of rows, one per thread: each row
-    of ``dense`` is read once and added, scaled, to the rows of its non-zeros' columns."""
-    n_rows = indptr.size - 1
-    n_dense = dense.shape[1]
-    partial = np.zeros((n_parts, n_cols, n_dense))
-    block = (n_rows + n_parts - 1) // n_parts
-    for part in prange(n_parts):
-        acc = partial[part]
-        for i in range(part * block, min(n_rows, (part + 1) * block)):
-            source = dense[i]
-            for k in range(indptr[i], indptr[i + 1]):
+def _column_sparse_product(indptr, indices, values, dense, row_block):
+    """Aᵀ dense (n_cols, n_dense) for A (n_rows × n_cols) in compressed-column form with
+    ascending row indices: block by block of ``row_block`` rows of ``dense``, each column
+    j of A adds its non-zeros in the block, scaled, to row j of the result. Threads take
+    columns, so each writes its own rows."""
+    n_cols = indptr.size - 1
+    n_rows, n_dense = dense.shape
+    out = np.zeros((n_cols, n_dense))
+    cursor = indptr[:-1].copy()
+    for first in range(0, n_rows, row_block):
+        last = first + row_block
+        for j in prange(n_cols):
+            acc = out[j]
+            k = cursor[j]
+            end = indptr[j + 1]
+            while k < end and indices[k] < last:
                 value = values[k]
-                row = acc[indices[k]]
+                source = dense[indices[k]]
                 for m in range(n_dense):
-                    row[m] += value * source[m]
-    return partial
+                    acc[m] += value * source[m]
+                k += 1
+            cursor[j] = k
+    return out
 
 
 def weighted_gram(dense: np.ndarray, inverse_variance: np.ndarray) -> np.ndarray:
