@@ -5,7 +5,13 @@ import pytest
 from sklearn.cluster import KMeans
 
 from mgelens.grid import pixel_centres, sub_grid
-from mgelens.source.border import border_pixels, border_sub_pixels, relocate_to_border
+from mgelens.source.border import (
+    _farthest_crossings,
+    _ray_side_distance,
+    border_pixels,
+    border_sub_pixels,
+    relocate_to_border,
+)
 from mgelens.source.image_mesh import (
     SEEDING_POINTS_PER_CELL,
     _grid_geometry,
@@ -369,6 +375,31 @@ def test_polygon_rule_on_a_polygon_that_is_not_star_shaped_takes_the_farthest_cr
         expected.append(max(crossings))
     new_x, new_y = relocate_to_border(px, py, bx, by, rule="polygon")
     np.testing.assert_allclose(np.hypot(new_x - ox, new_y - oy), expected, rtol=1e-12)
+
+
+def test_farthest_crossings_equal_the_broadcast_of_every_side_bit_for_bit():
+    """The compiled loop over a polygon's sides gives the farthest crossing per ray to the
+    last bit of the (rays × sides) broadcast of `_ray_side_distance`, on polygons that
+    fold back and cross themselves, with a side along a ray and rays of zero length."""
+    rng = np.random.default_rng(3)
+    for trial in range(60):
+        n = int(rng.integers(3, 120))
+        theta = rng.uniform(0.0, 2.0 * np.pi, n)
+        if trial % 2:
+            theta.sort()
+        radius = rng.uniform(0.2, 2.0, n)
+        vx, vy = radius * np.cos(theta), radius * np.sin(theta)
+        if trial % 7 == 0:
+            vx[:2], vy[:2] = 0.0, [0.5, 1.0]  # a side along the ray towards +y
+        dx, dy = rng.normal(size=500), rng.normal(size=500)
+        dx[:2], dy[:2] = 0.0, [0.0, 1.0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            expected = _ray_side_distance(dx[:, None], dy[:, None], vx, vy, np.arange(n)).max(
+                axis=1
+            )
+            farthest = _farthest_crossings(dx, dy, vx, vy)
+        assert np.array_equal(farthest, expected)
+        assert np.isfinite(farthest[2:]).any()
 
 
 def test_polygon_rule_is_continuous_and_the_nearest_point_rule_is_not():
