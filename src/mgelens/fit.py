@@ -209,9 +209,9 @@ class FitDataset:
         if key not in self._columns_cache:
             if len(self._columns_cache) >= 4:
                 self._columns_cache.pop(next(iter(self._columns_cache)))
-            self._columns_cache[key] = {
-                "columns": self.light_grid.blurred_columns(list(components))
-            }
+            columns = self.light_grid.blurred_columns(list(components))
+            columns.flags.writeable = False  # shared by every fit of these components
+            self._columns_cache[key] = {"columns": columns}
         return self._columns_cache[key]
 
     def held_support(self, source: "PixelizedSource") -> np.ndarray:
@@ -614,7 +614,10 @@ def fit(
     non-positive-definite system, NNLS iteration cap).
     """
     fixed, lens_columns, source_columns = _dense_light(dataset, model)
-    dense = np.hstack([lens_columns, source_columns])
+    if source_columns.shape[1] == 0:  # no copy of the (cached, read-only) lens columns
+        dense = lens_columns
+    else:
+        dense = np.hstack([lens_columns, source_columns])
     operator = system = None
     if isinstance(model.source, PixelizedSource):
         system = dataset.repeated_source(model.mass, model.source)
