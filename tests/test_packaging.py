@@ -1,5 +1,6 @@
 """Packaging checks: environment.yml mirrors pyproject.toml, ruff is clean, CLI runs."""
 
+import ast
 import shutil
 import subprocess
 import sys
@@ -44,3 +45,29 @@ def test_console_script_reports_version():
         [sys.executable, "-m", "mgelens", "--version"], capture_output=True, text=True, check=True
     )
     assert mgelens.__version__ in result.stdout
+
+
+def test_help_lists_every_command_with_its_own_help_without_importing_any():
+    """`mgelens --help` reads each command's help from its source: the listing equals the
+    help the command's `register` gives when imported, and no command module is loaded."""
+    script = (
+        "import sys\n"
+        "from mgelens import cli\n"
+        "parser = cli.build_parser()\n"
+        "actions = [a for a in parser._actions if a.dest == 'command'][0]\n"
+        "print({c.dest: c.help for c in actions._choices_actions})\n"
+        "print(sorted(m for m in sys.modules if m.startswith('mgelens.commands.')))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True
+    )
+    listed, imported = (ast.literal_eval(line) for line in result.stdout.splitlines())
+    assert imported == []
+    from mgelens import cli
+
+    assert sorted(listed) == cli.command_names()
+    for name in cli.command_names():
+        registered = cli.build_parser(only=name)
+        (command,) = [a for a in registered._actions if a.dest == "command"]
+        assert listed[name] == command._choices_actions[0].help
+        assert listed[name]

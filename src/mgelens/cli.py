@@ -7,10 +7,12 @@ hand without Snakemake.
 """
 
 import argparse
+import ast
 import importlib
 import logging
 import pkgutil
 import sys
+from pathlib import Path
 
 from mgelens import __version__, commands
 
@@ -20,8 +22,23 @@ def command_names() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(commands.__path__))
 
 
+def command_help(name: str) -> str | None:
+    """The one-line ``help=`` that subcommand ``name``'s ``register`` gives its parser,
+    read from the module's source without importing it (the commands import numba,
+    scipy and matplotlib); None if it is not a literal string there."""
+    source = Path(commands.__path__[0], f"{name}.py").read_text(encoding="utf-8")
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "add_parser":
+            for keyword in node.keywords:
+                if keyword.arg == "help" and isinstance(keyword.value, ast.Constant):
+                    return keyword.value.value
+    return None
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    """The argument parser; with ``only``, just that subcommand is imported (fast start)."""
+    """The argument parser. With ``only``, just that subcommand is imported and
+    registered; without, every subcommand is listed with its help (:func:`command_help`)
+    and none is imported, so that ``mgelens --help`` starts at once."""
     parser = argparse.ArgumentParser(
         prog="mgelens",
         description="Strong-lens modelling with an MGE lens light (He et al. 2024).",
@@ -29,8 +46,11 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"mgelens {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in [only] if only else command_names():
-        importlib.import_module(f"mgelens.commands.{name}").register(subparsers)
+    if only:
+        importlib.import_module(f"mgelens.commands.{only}").register(subparsers)
+    else:
+        for name in command_names():
+            subparsers.add_parser(name, help=command_help(name))
     return parser
 
 
