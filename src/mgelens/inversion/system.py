@@ -194,8 +194,8 @@ class WeightedBlurredMapping:
 ROW_BLOCK = 256
 """Image rows of L per pass of :func:`_column_sparse_product`: 256 rows of 190 lens-light
 columns (390 kB) stay in a core's L2 cache while every source pixel's non-zeros in them
-are summed (slacs1103+5322's LIGHT at 1,000 source pixels: 22 ms a call against 27 ms for
-one pass over the rows of the compressed-row form, which scatters into all of F_LS)."""
+are summed, where a pass over the rows of W B f would scatter each row of L into all of
+F_LS (docs/benchmarks.md, "Two exact kernels for 1,000-pixel calls")."""
 
 
 @njit(parallel=True, fastmath=True)

@@ -175,8 +175,7 @@ def _ray_side_distance(dx, dy, vx, vy, side):
 def _farthest_crossings(dx, dy, vx, vy):
     """The largest of :func:`_ray_side_distance` over every side of the polygon (vx, vy),
     per ray towards (dx, dy): the same arithmetic, one ray and side at a time instead of
-    (rays × sides) work arrays (a traced border that is not star-shaped: ~1,500 rays and
-    200 sides in 0.5 ms instead of ~40 ms)."""
+    (rays × sides) work arrays (for a traced border that is not star-shaped)."""
     n_sides = vx.size
     farthest = np.full(dx.size, -np.inf)
     for i in range(dx.size):
