@@ -1367,7 +1367,7 @@ def test_mass_mesh_jobs_pool_into_the_whole_phases_result(sersic_run, mock_dir):
         record = json.loads((sersic_run / f"mass_mesh{mesh}" / "result.json").read_text())
         assert record["settings"]["mesh"] == mesh
         assert record["settings"]["model"]["source"]["kmeans_seed"] == mesh
-        assert record["sampler"]["seed"] == 1 + mesh
+        assert record["sampler"]["seed"] == record["settings"]["mesh_seed"] == 1 + mesh
     arguments = ["phase", "mass", "--lens-dir", str(mock_dir), "--results", str(sersic_run)]
     slam = json.dumps(settings.to_dict())
     (sersic_run / "pooled").mkdir()  # a whole MASS run interrupted there left its checkpoint
@@ -1384,8 +1384,22 @@ def test_mass_mesh_jobs_pool_into_the_whole_phases_result(sersic_run, mock_dir):
     assert [m["kmeans_seed"] for m in records[1]["settings"]["meshes"]] == [0, 1]
     assert not list(joined.glob("checkpoint-*"))
     assert recorded_cpu_seconds(joined) > 0.0  # the pool job recorded its process's CPU
+    # a mesh whose peak check restarted it (seed + 1, twice the live points) is pooled:
+    # its job started from the phase's seed
+    result_file = sersic_run / "mass_mesh0" / "result.json"
+    original = result_file.read_text()
+    restarted = json.loads(original)
+    restarted["sampler"]["seed"] = 2
+    result_file.write_text(json.dumps(restarted))
+    try:
+        mesh_pool.pool_meshes(sersic_run, settings, seed=1, folder_name="restarted")
+    finally:
+        result_file.write_text(original)
+    assert (
+        json.loads((sersic_run / "restarted" / "result.json").read_text())["sampler"]["seed"] == 2
+    )
     # another seed, other settings, a missing mesh job, a changed input
-    with pytest.raises(mesh_pool.MeshPoolError, match=r"sampled with seed 1, not 3"):
+    with pytest.raises(mesh_pool.MeshPoolError, match=r"sampled from seed 1, not 3"):
         mesh_pool.pool_meshes(sersic_run, settings, seed=3, folder_name="refused")
     other = sersic_settings(mass_source_pixels=40)
     with pytest.raises(mesh_pool.MeshPoolError, match="written with other slam settings"):

@@ -60,7 +60,8 @@ def pool_meshes(
     settings : SlamSettings
         The chain's settings; every mesh job must have been run with them.
     seed : int
-        The phase's sampler seed; mesh ``k``'s run must have sampler seed ``seed + k``.
+        The phase's sampler seed; mesh ``k``'s run must have started from sampler seed
+        ``seed + k`` (its ``mesh_seed``; a peak restart then samples with the next seeds).
     folder_name : str
         The pooled phase's folder (default ``mass``).
 
@@ -89,7 +90,7 @@ def pool_meshes(
     output = pool_runs(outputs)
     best_run = int(np.argmax([run.log_likelihoods.max() for run in outputs]))
     best = runs[best_run]
-    record = {key: value for key, value in best.settings.items() if key != "mesh"}
+    record = {k: v for k, v in best.settings.items() if k not in ("mesh", "mesh_seed")}
     record["meshes"] = [
         mesh_run_record(run.settings["model"]["source"], run.output, k == best_run)
         for k, run in enumerate(runs)
@@ -141,10 +142,11 @@ def _mesh_result(folder: Path, mesh: int, settings: SlamSettings, seed: int) -> 
     expected = json.loads(json.dumps(settings.to_dict()))
     if result.settings.get("slam") != expected:
         raise MeshPoolError(f"{folder / RESULT_FILE} was written with other slam settings; {rerun}")
-    if result.output.seed != seed + mesh:
+    started = result.settings.get("mesh_seed")
+    if started != seed + mesh:
         raise MeshPoolError(
-            f"{folder / RESULT_FILE} was sampled with seed {result.output.seed}, not "
-            f"{seed + mesh} (the phase's seed {seed} + mesh {mesh}); {rerun}"
+            f"{folder / RESULT_FILE} was sampled from seed {started}, not {seed + mesh} "
+            f"(the phase's seed {seed} + mesh {mesh}); {rerun}"
         )
     if not (folder / MODEL_FILE).is_file():
         raise MeshPoolError(f"{folder / MODEL_FILE} not found: {rerun}")

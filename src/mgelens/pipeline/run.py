@@ -359,7 +359,7 @@ def _solve(
         phase=best_problem.name,
         space=best_problem.space,
         output=output,
-        settings=_phase_settings(problems, outputs, best_run, settings, lens, lens_dir, mesh),
+        settings=_phase_settings(problems, outputs, best_run, settings, lens, lens_dir, mesh, seed),
         input_checksums=checksums,
     )
     values = best_problem.space.values(output.max_likelihood())
@@ -409,10 +409,13 @@ def _phase_settings(
     lens: LensSpec,
     lens_dir: Path,
     mesh: int | None = None,
+    seed: int | None = None,
 ) -> dict:
     """The ``settings`` record of ``result.json``: the chain's settings, the lens spec, the
     mask radius used and the model of the run holding the highest-likelihood sample, and
-    each mesh's run when MASS pooled several; a MASS mesh job's index as ``mesh``."""
+    each mesh's run when MASS pooled several; a MASS mesh job's index as ``mesh`` and the
+    sampler seed it started from as ``mesh_seed`` (its output's ``seed`` is the last
+    attempt's: a restart that doubles the live points adds 1)."""
     best_problem = problems[best_run]
     phase_settings = {
         "profile": settings.profile,
@@ -430,6 +433,7 @@ def _phase_settings(
         ]
     if mesh is not None:
         phase_settings["mesh"] = mesh
+        phase_settings["mesh_seed"] = seed
     return phase_settings
 
 
