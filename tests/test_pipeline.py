@@ -1398,6 +1398,14 @@ def test_mass_mesh_jobs_pool_into_the_whole_phases_result(sersic_run, mock_dir):
     assert (
         json.loads((sersic_run / "restarted" / "result.json").read_text())["sampler"]["seed"] == 2
     )
+    older = json.loads(original)
+    del older["settings"]["mesh_seed"]  # a mesh result written before it was recorded
+    result_file.write_text(json.dumps(older))
+    try:
+        with pytest.raises(mesh_pool.MeshPoolError, match="does not record the seed"):
+            mesh_pool.pool_meshes(sersic_run, settings, seed=1, folder_name="refused")
+    finally:
+        result_file.write_text(original)
     # another seed, other settings, a missing mesh job, a changed input
     with pytest.raises(mesh_pool.MeshPoolError, match=r"sampled from seed 1, not 3"):
         mesh_pool.pool_meshes(sersic_run, settings, seed=3, folder_name="refused")

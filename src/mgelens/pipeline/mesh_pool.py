@@ -143,6 +143,11 @@ def _mesh_result(folder: Path, mesh: int, settings: SlamSettings, seed: int) -> 
     if result.settings.get("slam") != expected:
         raise MeshPoolError(f"{folder / RESULT_FILE} was written with other slam settings; {rerun}")
     started = result.settings.get("mesh_seed")
+    if started is None:
+        raise MeshPoolError(
+            f"{folder / RESULT_FILE} does not record the seed its sampling started from "
+            f"(written by an older mgelens); {rerun}"
+        )
     if started != seed + mesh:
         raise MeshPoolError(
             f"{folder / RESULT_FILE} was sampled from seed {started}, not {seed + mesh} "

@@ -255,8 +255,9 @@ class PriorTransform:
     """The unit-cube map of several priors at once: ``transform(u)`` with u of shape
     (..., n) gives each prior's :meth:`transform` of its column, the same numbers (the
     same elementwise operations), but the truncated Gaussians, which passed priors make
-    the most common, in one vectorised evaluation instead of one per prior: a sampler
-    calls this once per likelihood call, and SP's 17 priors one by one cost 0.6 ms a call.
+    the most common, in one vectorised evaluation instead of one per prior (a sampler
+    calls this once per likelihood call; docs/benchmarks.md, "The samplers' own
+    overheads").
     """
 
     def __init__(self, priors: tuple[Prior, ...]):

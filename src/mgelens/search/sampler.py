@@ -478,10 +478,10 @@ def _write_nautilus_checkpoint(sampler, checkpoint: Path) -> None:
     killed while writing keeps the previous checkpoint.
 
     Nautilus itself, given a file, rewrites it whole after every new bound (every bound
-    and network again each time: 7 s of a 134-s MASS run on M2) and in place, so a run
-    stopped during a write left a file it could not resume from (on M2, one without its
-    random state). The sampler therefore runs without a file, and this writes its state
-    between ``Sampler.run`` calls, where it is consistent.
+    and network again each time; docs/benchmarks.md, "The samplers' own overheads") and
+    in place, so a run stopped during a write left a file it could not resume from (on
+    M2, one without its random state). The sampler therefore runs without a file, and
+    this writes its state between ``Sampler.run`` calls, where it is consistent.
     """
     with atomic_path(checkpoint, suffix=".h5") as temporary:
         sampler.write(temporary, overwrite=True)
