@@ -18,6 +18,7 @@ from mgelens.search.results import (
     file_sha256,
     input_checksums,
     passed_priors,
+    prior_edges,
 )
 from mgelens.search.sampler_settings import SamplerSettings
 
@@ -240,3 +241,54 @@ def test_mismatched_output_is_refused(result):
     space = ParameterSpace.from_priors({"mass.centre_x": Gaussian(0.0, 0.1)})
     with pytest.raises(ValueError, match="do not match"):
         PhaseResult(phase="x", space=space, output=result.output)
+
+
+def _written_record(space, samples, tmp_path) -> dict:
+    """The result.json record of equally weighted ``samples`` of ``space``'s free
+    parameters, as a phase writes it."""
+    n = samples.shape[0]
+    output = SamplerOutput(
+        names=space.free_names,
+        samples=samples,
+        log_weights=np.full(n, -np.log(n)),
+        log_likelihoods=np.zeros(n),
+        log_evidence=0.0,
+        log_evidence_error=0.1,
+        n_calls=n,
+        n_rejected=0,
+        runtime=1.0,
+        n_resumes=0,
+        method="nautilus",
+        settings=SamplerSettings().to_dict(),
+        seed=0,
+    )
+    PhaseResult(phase="mass", space=space, output=output, settings={}).write(tmp_path)
+    return json.loads((tmp_path / "result.json").read_text())
+
+
+def test_prior_edges_names_a_posterior_cut_by_its_prior(result, tmp_path):
+    """A slope piled at the EPL prior's lower bound 1.5 and a shear piled at its upper
+    bound are named; a shear whose 3σ interval ends 1σ from its bound is not, nor are the
+    fixture's parameters under Gaussian and wide priors."""
+    space = ParameterSpace(
+        (
+            Parameter("mass.slope", prior=Uniform(1.5, 3.0)),
+            Parameter("shear.gamma_1", prior=Uniform(-0.2, 0.2)),
+            Parameter("shear.gamma_2", prior=Uniform(-0.2, 0.2)),
+        )
+    )
+    rng = np.random.default_rng(3)
+    n = 4000
+    slope = 1.5 + np.abs(rng.normal(0.0, 0.01, n))  # half a Gaussian against the bound
+    inside = rng.normal(0.1, 0.01, n)  # its 3σ end 7σ from the upper bound
+    near = rng.normal(-0.16, 0.01, n)  # its 3σ end 1σ from the lower bound
+    record = _written_record(space, np.column_stack([slope, inside, near]), tmp_path / "a")
+    assert prior_edges(record) == ["mass.slope at its lower bound 1.5"]
+    piled = 0.2 - np.abs(rng.normal(0.0, 0.01, n))
+    record = _written_record(space, np.column_stack([slope, piled, near]), tmp_path / "b")
+    assert prior_edges(record) == [
+        "mass.slope at its lower bound 1.5",
+        "shear.gamma_1 at its upper bound 0.2",
+    ]
+    result.write(tmp_path / "fixture")
+    assert prior_edges(json.loads((tmp_path / "fixture" / "result.json").read_text())) == []

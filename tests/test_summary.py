@@ -158,6 +158,15 @@ def write_lens_folder(root, lens, theta, q, slope, names, measured, flag):
     # record predates the peak check
     sampler = {"peak_gain": 5.1 if flag else 0.4} if measured else {}
     result = {"converged": not flag, "sampler": sampler, "max_likelihood_fit": light_record(names)}
+    if measured:  # the flagged lens's slope also runs into its prior's bound 1.5
+        low_3 = 1.5 if flag else slope - 0.15
+        uniform = {"type": "Uniform", "lower": 1.5, "upper": 3.0}
+        result["parameter_space"] = {"parameters": [
+            {"name": "mass.slope", "status": "free", "prior": uniform},
+            {"name": "mass.centre_y", "status": "fixed", "prior": None},
+        ]}  # fmt: skip
+        result["interval_1sigma"] = {"mass.slope": [slope - 0.05, slope + 0.05]}
+        result["interval_3sigma"] = {"mass.slope": [low_3, slope + 0.15]}
     write_json(folder / "mass" / "result.json", result)
     pd.DataFrame(
         {
@@ -267,6 +276,8 @@ def test_lens_table_converts_and_compares(lens_folders, reference):
     assert converged == [True, False, True]
     assert (sie["mass_peak_gain"], epl["mass_peak_gain"]) == (0.4, 5.1)
     assert math.isnan(mock["mass_peak_gain"])
+    assert (sie["prior_edge"], epl["prior_edge"]) == ("none", "mass.slope at its lower bound 1.5")
+    assert pd.isna(mock["prior_edge"])
     assert mock[["bolton_b_sie", "shajib_theta_e", "quality_statistic"]].isna().all()
 
 

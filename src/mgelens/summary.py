@@ -93,6 +93,10 @@ mass_peak_gain                  the largest gain in ln L + ln prior that the pea
                                 local search found above the best sample of a MASS mesh's
                                 final run (:mod:`mgelens.search.peak_check`; NaN where the
                                 sampler has no check)
+prior_edge                      the MASS parameters whose 3σ interval the prior cuts
+                                (:func:`mgelens.search.results.prior_edges`, e.g.
+                                ``mass.slope at its lower bound 1.5``; ``none``; empty in
+                                records without their parameter space)
 ==============================  ==============================================================
 
 Published columns are NaN for lenses absent from a table, and all NaN (with a logged
@@ -128,7 +132,7 @@ from mgelens.pipeline.records import (
     read_result_record,
 )
 from mgelens.published import posterior_einstein_radius, published_values
-from mgelens.search.results import RESULT_FILE, SAMPLES_FILE
+from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, prior_edges
 
 logger = logging.getLogger(__name__)
 
@@ -185,6 +189,7 @@ FIT_COLUMNS = (
     "singly_imaged_flag",
     "mass_converged",
     "mass_peak_gain",
+    "prior_edge",
 )  # fmt: skip
 """Columns :func:`lens_table` adds to :data:`TABLE_COLUMNS`."""
 QUALITY_FILE = "quality.json"
@@ -417,6 +422,9 @@ def _fit_row(lens_folder: Path) -> dict:
         row.update(_multiplicity_columns(quality))
         row["mass_converged"] = bool(result["converged"])
         row["mass_peak_gain"] = _number(result.get("sampler", {}).get("peak_gain"))
+        row["prior_edge"] = (
+            "; ".join(prior_edges(result)) or "none" if "parameter_space" in result else pd.NA
+        )
     except FileNotFoundError as exc:
         raise ValueError(f"{lens_folder}: {exc.filename} not found") from exc
     except PhaseInputError as exc:

@@ -136,6 +136,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"lensing_flagged: {int(table['lensing_flag'].sum())} of {len(table)}")
     unconverged = table.loc[table["mass_converged"].eq(False), "lens"]
     print(f"mass_unconverged: {len(unconverged)} of {len(table)} {list(unconverged)}")
+    at_edge = table.loc[table["prior_edge"].notna() & table["prior_edge"].ne("none"), "lens"]
+    print(f"prior_edge: {len(at_edge)} of {int(table['prior_edge'].notna().sum())} {list(at_edge)}")
     for name, column in (("bolton", "bolton_b_sie"), ("shajib", "shajib_theta_e")):
         fit = slope_through_origin(table[column], table["theta_e_lt"])
         print(f"theta_e_lt_vs_{name}: {slope_text(*fit)}")

@@ -298,3 +298,31 @@ def passed_priors(
         bounds = limits.get(name, previous.space.parameter(name).limits)
         priors[name] = passed_prior(name, mu, half_width, widths[name], bounds, rule)
     return priors
+
+
+PRIOR_EDGE_FRACTION = 0.1
+"""A posterior is at its prior's edge when its 3σ interval ends within this fraction of
+its 1σ half-width of a finite bound of the prior (:func:`prior_edges`)."""
+
+
+def prior_edges(result: Mapping) -> list[str]:
+    """The free parameters of a ``result.json`` record (:meth:`PhaseResult.write`) whose
+    posterior runs into a finite bound of their prior, each as ``"name at its lower
+    bound 1.5"``: the 3σ interval ends within :data:`PRIOR_EDGE_FRACTION` of the 1σ
+    half-width of the bound. Such an interval is cut by the prior, not by the data (a
+    slope piled at the EPL prior's 1.5, on a bright lens whose arcs are faint), and its
+    width says nothing about how well the data measure the parameter."""
+    edges = []
+    for entry in result["parameter_space"]["parameters"]:
+        if entry["status"] != "free":
+            continue
+        name, prior = entry["name"], entry.get("prior") or {}
+        low_3, high_3 = result["interval_3sigma"][name]
+        low_1, high_1 = result["interval_1sigma"][name]
+        reach = PRIOR_EDGE_FRACTION * (high_1 - low_1) / 2.0
+        lower, upper = prior.get("lower"), prior.get("upper")
+        if lower is not None and low_3 - lower <= reach:
+            edges.append(f"{name} at its lower bound {lower:g}")
+        if upper is not None and upper - high_3 <= reach:
+            edges.append(f"{name} at its upper bound {upper:g}")
+    return edges
