@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from sampler_outputs import equal_weight_run
 
 from mgelens.geometry import axis_ratio_and_angle_from, ell_comps_from
 from mgelens.search.model import Parameter, ParameterSpace
@@ -246,22 +247,7 @@ def test_mismatched_output_is_refused(result):
 def _written_record(space, samples, tmp_path) -> dict:
     """The result.json record of equally weighted ``samples`` of ``space``'s free
     parameters, as a phase writes it."""
-    n = samples.shape[0]
-    output = SamplerOutput(
-        names=space.free_names,
-        samples=samples,
-        log_weights=np.full(n, -np.log(n)),
-        log_likelihoods=np.zeros(n),
-        log_evidence=0.0,
-        log_evidence_error=0.1,
-        n_calls=n,
-        n_rejected=0,
-        runtime=1.0,
-        n_resumes=0,
-        method="nautilus",
-        settings=SamplerSettings().to_dict(),
-        seed=0,
-    )
+    output = equal_weight_run(space.free_names, samples, np.zeros(len(samples)))
     PhaseResult(phase="mass", space=space, output=output, settings={}).write(tmp_path)
     return json.loads((tmp_path / "result.json").read_text())
 
