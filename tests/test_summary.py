@@ -369,6 +369,10 @@ def test_einstein_radius_figure(lens_folders, reference, tmp_path):
     crossed = [line for line in bolton.lines if line.get_label() == "MASS not converged"]
     epl = table.set_index("lens").loc["slacs0037-0942"]  # its MASS missed its peak
     np.testing.assert_allclose(crossed[0].get_xydata(), [[epl["bolton_b_sie"], epl["theta_e_lt"]]])
+    edged = [line for line in bolton.lines if line.get_label() == "MASS at a prior bound"]
+    assert len(edged) == 1  # its slope at the bound; the other's "none", the mock's empty
+    assert edged[0].get_marker() == "^"
+    np.testing.assert_allclose(edged[0].get_xydata(), [[epl["bolton_b_sie"], epl["theta_e_lt"]]])
     table.loc[table["lens"] == "slacs0029-0055", "lensing_flag"] = True
     bolton = einstein_radius_figure(table).axes[0]
     boxed = [line for line in bolton.lines if line.get_label() == "lensing flagged"]
@@ -485,6 +489,7 @@ def test_summary_command(tmp_path, lens_folders, reference, capsys):
     assert "singly_imaged_flagged: 1 of 1 measured" in printed
     assert "lensing_flagged: 1 of 3" in printed
     assert "mass_unconverged: 1 of 3 ['slacs0037-0942']" in printed
+    assert "prior_edge: 1 of 2 ['slacs0037-0942']" in printed
     assert "light_models_chosen: {'X2+point': 1} (1 by evidence)" in printed
     assert "theta_e_lt_vs_bolton: a = " in printed
     assert "theta_e_lt_vs_shajib: a = 0.958 (1 lens)" in printed

@@ -6,8 +6,9 @@ Two panels of a :func:`mgelens.summary.lens_table`: our θ_E^LT (MASS posterior 
 al. 2021's imaging-only power-law θ_E (with their 1σ errors). Each panel has the 1:1 line,
 a ±5 % band, the names of lenses off by more than 10 %, fits flagged by the residuals
 (``quality_flag``) circled in red, by the lensing check (``lensing_flag``) boxed in
-orange, singly imaged ones (``singly_imaged_flag``) in purple diamonds and lenses whose
-MASS did not converge (``mass_converged`` false) in grey crosses, and the least-squares
+orange, singly imaged ones (``singly_imaged_flag``) in purple diamonds, lenses whose
+MASS did not converge (``mass_converged`` false) in grey crosses and those whose MASS
+interval a prior bound cuts (``prior_edge``) in brown triangles, and the least-squares
 slope of
 y = a·x (:func:`mgelens.published.slope_through_origin`). A panel without published values
 says so. :func:`slope_figure` sets our γ against Shajib's in the same way, naming the
@@ -31,9 +32,11 @@ FLAG_MARKERS = (
     ("lensing_flag", "s", "tab:orange", "lensing flagged"),
     ("singly_imaged_flag", "D", "tab:purple", "singly imaged"),
     ("mass_unconverged", "X", "tab:gray", "MASS not converged"),
+    ("at_prior_edge", "^", "tab:brown", "MASS at a prior bound"),
 )
-"""(flag, marker, colour, legend label) of the flagged fits' outlines: a table column, or
-``mass_unconverged``, ``mass_converged`` false."""
+"""(flag, marker, colour, legend label) of the flagged fits' outlines: a table column,
+``mass_unconverged`` (``mass_converged`` false) or ``at_prior_edge`` (``prior_edge``
+names a parameter)."""
 PANELS = (
     ("bolton_b_sie", None, r"Bolton et al. 2008 $b_{\rm SIE}$ [arcsec]"),
     (
@@ -48,6 +51,9 @@ def _outline_flagged(ax: Axes, rows: pd.DataFrame, x: np.ndarray, y: np.ndarray)
     """Outline the points of fits flagged by each of :data:`FLAG_MARKERS`."""
     if "mass_converged" in rows:
         rows = rows.assign(mass_unconverged=rows["mass_converged"].eq(False))
+    if "prior_edge" in rows:
+        edge = rows["prior_edge"]
+        rows = rows.assign(at_prior_edge=edge.notna() & edge.ne("none"))
     for flag, marker, colour, name in FLAG_MARKERS:
         if flag in rows:
             flagged = rows[flag].fillna(False).to_numpy(bool)
