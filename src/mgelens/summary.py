@@ -132,7 +132,7 @@ from mgelens.pipeline.records import (
     read_result_record,
 )
 from mgelens.published import posterior_einstein_radius, published_values
-from mgelens.search.results import RESULT_FILE, SAMPLES_FILE, prior_edges
+from mgelens.search.results import NO_PRIOR_EDGE, RESULT_FILE, SAMPLES_FILE, prior_edges
 
 logger = logging.getLogger(__name__)
 
@@ -423,7 +423,9 @@ def _fit_row(lens_folder: Path) -> dict:
         row["mass_converged"] = bool(result["converged"])
         row["mass_peak_gain"] = _number(result.get("sampler", {}).get("peak_gain"))
         row["prior_edge"] = (
-            "; ".join(prior_edges(result)) or "none" if "parameter_space" in result else pd.NA
+            ("; ".join(prior_edges(result)) or NO_PRIOR_EDGE)
+            if "parameter_space" in result
+            else pd.NA
         )
     except FileNotFoundError as exc:
         raise ValueError(f"{lens_folder}: {exc.filename} not found") from exc

@@ -32,6 +32,7 @@ from mgelens.plot.comparison import einstein_radius_figure, slope_figure
 from mgelens.plot.mosaic import read_panel, residual_mosaic
 from mgelens.plot.summary import histogram_figure
 from mgelens.published import SLOPE_TENSION, slope_differences, slope_text, slope_through_origin
+from mgelens.search.results import names_a_prior_edge
 from mgelens.summary import (
     DELTA_PA_THRESHOLD,
     DELTA_Q_THRESHOLD,
@@ -136,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"lensing_flagged: {int(table['lensing_flag'].sum())} of {len(table)}")
     unconverged = table.loc[table["mass_converged"].eq(False), "lens"]
     print(f"mass_unconverged: {len(unconverged)} of {len(table)} {list(unconverged)}")
-    at_edge = table.loc[table["prior_edge"].notna() & table["prior_edge"].ne("none"), "lens"]
+    at_edge = table.loc[names_a_prior_edge(table["prior_edge"]), "lens"]
     print(f"prior_edge: {len(at_edge)} of {int(table['prior_edge'].notna().sum())} {list(at_edge)}")
     for name, column in (("bolton", "bolton_b_sie"), ("shajib", "shajib_theta_e")):
         fit = slope_through_origin(table[column], table["theta_e_lt"])

@@ -22,6 +22,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from mgelens.published import SLOPE_TENSION, slope_differences, slope_text, slope_through_origin
+from mgelens.search.results import names_a_prior_edge
 
 BAND = 0.05
 """Half-width of the shaded band about 1:1 (fraction)."""
@@ -52,8 +53,7 @@ def _outline_flagged(ax: Axes, rows: pd.DataFrame, x: np.ndarray, y: np.ndarray)
     if "mass_converged" in rows:
         rows = rows.assign(mass_unconverged=rows["mass_converged"].eq(False))
     if "prior_edge" in rows:
-        edge = rows["prior_edge"]
-        rows = rows.assign(at_prior_edge=edge.notna() & edge.ne("none"))
+        rows = rows.assign(at_prior_edge=names_a_prior_edge(rows["prior_edge"]))
     for flag, marker, colour, name in FLAG_MARKERS:
         if flag in rows:
             flagged = rows[flag].fillna(False).to_numpy(bool)

@@ -326,3 +326,13 @@ def prior_edges(result: Mapping) -> list[str]:
         if upper is not None and upper - high_3 <= reach:
             edges.append(f"{name} at its upper bound {upper:g}")
     return edges
+
+
+NO_PRIOR_EDGE = "none"
+"""The sample table's ``prior_edge`` entry of a MASS result that :func:`prior_edges` checked
+and found no parameter at a bound (an empty entry: a record without its parameter space)."""
+
+
+def names_a_prior_edge(column: pd.Series) -> pd.Series:
+    """Per entry of a ``prior_edge`` column: whether it names a parameter at a bound."""
+    return column.notna() & column.ne(NO_PRIOR_EDGE)
