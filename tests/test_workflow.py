@@ -921,8 +921,10 @@ def test_chain_sp_lands_in_the_true_mass_basin_of_m1(run_chain):
     shear. With 36 live points the quick SP from the anchor's priors stopped in a false
     mode (q 0.65, shear 0.067, centre y −0.004, max ln L −39,655); with the profile's 60
     it reached q 0.80, shear 0.006, centre (0.014, −0.074) and θ_E 1.187 (max ln L
-    −7,019). The quick profile now starts SP from the lensed arcs (``sp_start: search``):
-    19,293 calls, max ln L −7,024 (docs/slam.md, "SP's start in the quick profile").
+    −7,019). The quick profile now starts SP from the lensed arcs (``sp_start: search``;
+    dynesty: 19,293 calls, max ln L −7,024) and samples it with nautilus with one
+    network: 7,001 calls, max ln L −7,018.1, q 0.802, θ_E 1.187 (docs/slam.md, "SP:
+    nautilus with one network").
     """
     results = run_chain("M1") / "results" / "M1"
     sp = json.loads((results / "sp" / "result.json").read_text())

@@ -4,9 +4,10 @@ Two profiles give the defaults (:data:`PROFILES`):
 
 * ``paper``: the paper's settings (SPEC §8.1, §8.3): live points 200 / 150 / 100 / 150 /
   150, nautilus where the paper used it, 1500 k-means source pixels, a 34×34 overlay.
-* ``quick`` (default): dynesty random walks with few live points and a looser stopping
-  criterion from SP to LIGHT, nautilus with 30 live points in MASS (whose posterior is the
-  result) on each of two source meshes, pooled, 500 k-means source pixels, a 24×24
+* ``quick`` (default): nautilus with one network and 3 live points per parameter in SP,
+  dynesty random walks with few live points and a looser stopping criterion from SPix1
+  to LIGHT, nautilus with 30 live points in MASS (whose posterior is the result) on each
+  of two source meshes, pooled, 500 k-means source pixels, a 24×24
   overlay, a 2×2 source sub-grid (paper 4×4), light profiles over-sampled 2×2 (8×8
   within 0.3″ of the centre) and the PSF cut at 1e−4 of its peak, for the embedded
   default sample (M1–M3) on two cores. Its source mesh follows the continuous edge rule
@@ -494,7 +495,15 @@ _PAPER_SAMPLERS = {
 
 _QUICK = {"method": "dynesty_static", "sample": "rwalk", "dlogz": 1.0}
 _QUICK_SAMPLERS = {
-    "sp": SamplerSettings(n_live=60, peak_restarts=1, peak_evaluations=0, **_QUICK),
+    "sp": SamplerSettings(
+        method="nautilus",
+        n_live=51,
+        n_eff=300,
+        f_live=0.05,
+        n_networks=1,
+        peak_restarts=1,
+        peak_evaluations=0,
+    ),
     "spix1": SamplerSettings(n_live=24, plateau_restarts=2, **_QUICK),
     "spix2": SamplerSettings(n_live=12, plateau_restarts=2, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
@@ -502,13 +511,17 @@ _QUICK_SAMPLERS = {
         method="nautilus", n_live=30, n_eff=300, f_live=0.05, peak_restarts=2, peak_tolerance=2.0
     ),
 }
-"""Quick-profile samplers. SP to LIGHT: dynesty random walks (5 steps) with a loose
-stopping criterion; these phases hand their maximum-likelihood model on. SP, the most
-multimodal phase (17 parameters), uses 60 live points, and is sampled again with 120
-if its posterior falls more than 2 in ln L short of its start (``peak_restarts`` with
-the start as the reference point, no local search: on slacs1627-0053 60 live points
-settled in a mode 83 below the start's); SPix1 3 n_dim (24), SPix2 and
-LIGHT about 2 n_dim + 2 (dynesty needs more than 2 n_dim). ln ε has spikes over SPix2's
+"""Quick-profile samplers. SP to LIGHT hand their maximum-likelihood model on. SP, the
+most multimodal phase (17 parameters): nautilus with 51 live points (3 per parameter)
+and one neural network per bound, stopped like MASS; it reached higher maxima than
+dynesty's random walks with 60 live points in a third to a half of the calls, and one
+network trains in a quarter of the time of nautilus's default four, which on SP's cheap
+calls decided whether nautilus saved time at all. It is sampled again with twice the
+live points if its posterior falls more than 2 in ln L short of its start
+(``peak_restarts`` with the start as the reference point, no local search: on
+slacs1627-0053 dynesty's 60 live points settled in a mode 83 below the start's).
+SPix1 to LIGHT: dynesty random walks (5 steps) with a loose stopping criterion; SPix1
+3 n_dim (24), SPix2 and LIGHT about 2 n_dim + 2 (dynesty needs more than 2 n_dim). ln ε has spikes over SPix2's
 k-means weights, and over SPix1's mass when the lens light is unconstrained (pn-MGE), on
 which the walks can collapse, every live point a copy of one, and stop short of
 convergence: SPix1 and SPix2 then start afresh with twice the live points, up to twice
@@ -519,8 +532,7 @@ evidence and 300 effective samples are drawn; a run whose highest-posterior samp
 local search raises by more than 2 in ln L + ln prior missed the peak of a narrow slope–θ_E ridge
 and is sampled again with 60, then 120 live points (``peak_restarts``), as is a restart
 whose best sample falls more than 2 below the run it replaced. The measurements
-behind each choice, and nautilus tried for SP, are in docs/slam.md, "Quick-profile
-samplers"."""
+behind each choice are in docs/slam.md, "Quick-profile samplers"."""
 
 PROFILES: Mapping[str, SlamSettings] = MappingProxyType(
     {
