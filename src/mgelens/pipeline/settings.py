@@ -521,11 +521,11 @@ live points if its posterior falls more than 2 in ln L short of its start
 (``peak_restarts`` with the start as the reference point, no local search: on
 slacs1627-0053 dynesty's 60 live points settled in a mode 83 below the start's).
 SPix1 to LIGHT: dynesty random walks (5 steps) with a loose stopping criterion; SPix1
-3 n_dim (24), SPix2 and LIGHT about 2 n_dim + 2 (dynesty needs more than 2 n_dim). ln ε has spikes over SPix2's
-k-means weights, and over SPix1's mass when the lens light is unconstrained (pn-MGE), on
-which the walks can collapse, every live point a copy of one, and stop short of
-convergence: SPix1 and SPix2 then start afresh with twice the live points, up to twice
-(24, 48, 96 and 12, 24, 48); the real samples' configs (config/slacs.yaml,
+3 n_dim (24), SPix2 and LIGHT about 2 n_dim + 2 (dynesty needs more than 2 n_dim).
+ln ε has spikes over SPix2's k-means weights, and over SPix1's mass when the lens light
+is unconstrained (pn-MGE), on which the walks can collapse, every live point a copy of
+one, and stop short of convergence: SPix1 and SPix2 then start afresh with twice the
+live points, up to twice (24, 48, 96 and 12, 24, 48); the real samples' configs (config/slacs.yaml,
 config/paper.yaml) start SPix2 at 24. MASS, whose posterior is the result: nautilus with
 30 live points per source mesh (two meshes), stopped when the live set holds 5 % of the
 evidence and 300 effective samples are drawn; a run whose highest-posterior sample a
