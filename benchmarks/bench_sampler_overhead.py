@@ -20,6 +20,9 @@ import time
 import numpy as np
 from common import report, set_threads
 
+from mgelens.pipeline.settings import profile_settings
+from mgelens.search.sampler import nautilus_live_points
+
 POSTERIOR_WIDTH = 0.01
 """Scale of the Gaussian's principal widths in the unit cube (SP's posteriors span about a
 hundredth of its priors)."""
@@ -41,21 +44,23 @@ def gaussian_log_likelihood(n_dim: int, seed: int = 0):
     return log_likelihood
 
 
-def run_nautilus(n_dim: int, n_networks: int, n_live: int) -> tuple[int, float]:
-    """Calls and CPU seconds of one nautilus run (quick profile SP's stopping rule)."""
+def run_nautilus(n_dim: int, n_networks: int) -> tuple[int, float]:
+    """Calls and CPU seconds of one nautilus run with the quick profile SP's live points
+    per parameter and stopping rule, and ``n_networks`` networks per bound."""
     import nautilus
 
+    sp = profile_settings("quick").samplers["sp"]
     start = time.process_time()
     sampler = nautilus.Sampler(
         lambda u: u,
         gaussian_log_likelihood(n_dim),
         n_dim=n_dim,
-        n_live=n_live,
+        n_live=nautilus_live_points(sp.n_live, n_dim),
         n_networks=n_networks,
         seed=0,
         pass_dict=False,
     )
-    sampler.run(f_live=0.05, n_eff=300, verbose=False)
+    sampler.run(f_live=sp.f_live, n_eff=sp.n_eff, verbose=False)
     return sampler.n_like, time.process_time() - start
 
 
@@ -84,8 +89,8 @@ def main() -> None:
     args = parser.parse_args()
     set_threads(1)
     runs = {
-        "nautilus_1_network": lambda: run_nautilus(args.dims, 1, 3 * args.dims),
-        "nautilus_4_networks": lambda: run_nautilus(args.dims, 4, 3 * args.dims),
+        "nautilus_1_network": lambda: run_nautilus(args.dims, 1),
+        "nautilus_4_networks": lambda: run_nautilus(args.dims, 4),
         "dynesty_rwalk": lambda: run_dynesty(args.dims, 60),
     }
     for name, run in runs.items():

@@ -494,22 +494,15 @@ _PAPER_SAMPLERS = {
 }
 
 _QUICK = {"method": "dynesty_static", "sample": "rwalk", "dlogz": 1.0}
+_QUICK_NAUTILUS = {"method": "nautilus", "n_eff": 300, "f_live": 0.05}
 _QUICK_SAMPLERS = {
     "sp": SamplerSettings(
-        method="nautilus",
-        n_live=51,
-        n_eff=300,
-        f_live=0.05,
-        n_networks=1,
-        peak_restarts=1,
-        peak_evaluations=0,
+        n_live=51, n_networks=1, peak_restarts=1, peak_evaluations=0, **_QUICK_NAUTILUS
     ),
     "spix1": SamplerSettings(n_live=24, plateau_restarts=2, **_QUICK),
     "spix2": SamplerSettings(n_live=12, plateau_restarts=2, **_QUICK),
     "light": SamplerSettings(n_live=30, **_QUICK),
-    "mass": SamplerSettings(
-        method="nautilus", n_live=30, n_eff=300, f_live=0.05, peak_restarts=2, peak_tolerance=2.0
-    ),
+    "mass": SamplerSettings(n_live=30, peak_restarts=2, peak_tolerance=2.0, **_QUICK_NAUTILUS),
 }
 """Quick-profile samplers. SP to LIGHT hand their maximum-likelihood model on. SP, the
 most multimodal phase (17 parameters): nautilus with 51 live points (3 per parameter)
