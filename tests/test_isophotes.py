@@ -20,6 +20,7 @@ Truths used here, all independent of the contour/ellipse machinery under test:
 import json
 import logging
 import math
+from dataclasses import replace
 
 import numba
 import numpy as np
@@ -28,6 +29,7 @@ import pytest
 from astropy.io import fits
 from scipy import optimize
 
+from mgelens.atomic import write_json
 from mgelens.cli import main
 from mgelens.ellipse_fit import (
     HARMONIC_NAMES,
@@ -54,6 +56,7 @@ from mgelens.light import Gaussian, Sersic
 from mgelens.mass import SIE
 from mgelens.plot import save_png
 from mgelens.plot.isophotes import isophote_figure
+from mgelens.summary import lens_summary, sample_table
 
 PIXEL_SCALE = 0.05
 POINT_SAMPLED = {"sub_size": 1, "sub_size_centre": 1}
@@ -444,6 +447,31 @@ def test_mass_shape_of_an_sie():
     summary = shape.to_dict()
     assert summary["critical_curve_axis_ratio"] == ellipse.axis_ratio
     assert summary["axis_ratio_interval"] == (0.77, 0.83)
+
+
+def test_mass_shape_without_a_closed_critical_curve(tmp_path):
+    """An SIE whose critical curve (semi-major axis 2θ_E/(1 + q) = 5.6″) leaves the ±3″
+    grid keeps its q and φ, has no critical-curve fields and says why; its summary row has
+    NaN in those columns and its figure draws no curve (a sample is not stopped by it)."""
+    sie = SIE(centre=(0.0, 0.0), einstein_radius=5.0, axis_ratio=0.8, angle=30.0)
+    shape = mass_shape_from([sie], (0.75, 0.85), (25.0, 35.0))
+    assert (shape.axis_ratio, shape.angle) == (0.8, 30.0)
+    assert shape.critical_curve is None
+    assert shape.critical_curve_ellipse is None
+    assert shape.critical_curve_einstein_radius is None
+    assert shape.critical_curve_note.startswith("no closed tangential critical curve within ±3")
+    assert mass_shape_from([replace(sie, einstein_radius=1.0)]).critical_curve_note is None
+    image = deformed_image(0.7, 30.0, 0.01)
+    table = isophote_table(image, PIXEL_SCALE)
+    path = tmp_path / "lens" / "isophotes.json"
+    path.parent.mkdir()
+    write_json(path, lens_summary("lens", isophote_statistics(table), shape))
+    row = sample_table([path]).iloc[0]
+    assert row["mass_axis_ratio"] == 0.8
+    assert math.isnan(row["mass_critical_curve_einstein_radius"])
+    assert math.isnan(row["mass_critical_curve_axis_ratio"])
+    figure = isophote_figure(image, PIXEL_SCALE, table, shape)
+    assert "critical curve" not in [line.get_label() for line in figure.axes[0].lines]
 
 
 def test_isophote_figure(tmp_path):

@@ -27,7 +27,7 @@ in [0, 180). ``ell_comps`` follow :mod:`mgelens.geometry`. Lengths are arcsec.
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import contourpy
 import numpy as np
@@ -528,6 +528,8 @@ class MassShape:
         Effective Einstein radius sqrt(area/π) of the critical curve, arcsec; not the
         profile's θ_E parameter (SPEC §3.4), from which it differs for elliptical
         power laws.
+    critical_curve_note : str or None
+        Why the three critical-curve fields are None (no closed curve on the grid).
     """
 
     axis_ratio: float
@@ -537,6 +539,7 @@ class MassShape:
     critical_curve: tuple[np.ndarray, np.ndarray] | None = None
     critical_curve_ellipse: Ellipse | None = None
     critical_curve_einstein_radius: float | None = None
+    critical_curve_note: str | None = None
 
     def to_dict(self) -> dict:
         """JSON-ready summary (without the critical-curve vertices)."""
@@ -549,6 +552,7 @@ class MassShape:
             "critical_curve_axis_ratio": None if ellipse is None else ellipse.axis_ratio,
             "critical_curve_angle": None if ellipse is None else ellipse.angle,
             "critical_curve_einstein_radius": self.critical_curve_einstein_radius,
+            "critical_curve_note": self.critical_curve_note,
         }
 
 
@@ -563,19 +567,24 @@ def mass_shape_from(
 
     Computes the tangential critical curve (:func:`mgelens.mass.tangential_critical_curve`,
     all ``profiles`` including shear), its ellipse fit and effective Einstein radius.
-
-    Raises
-    ------
-    ValueError
-        If there is no closed tangential critical curve within ±``half_width``.
+    A mass without a closed tangential critical curve within ±``half_width`` (a sampler
+    stopped among its prior draws, a barely lensing mass) still has its q and φ: the
+    critical-curve fields are then None and ``critical_curve_note`` says why, so that one
+    such lens leaves empty columns in the sample summary instead of stopping it.
     """
     main = profiles[0]
-    x, y = tangential_critical_curve(profiles, grid_spacing, half_width)
-    return MassShape(
+    shape = MassShape(
         axis_ratio=float(main.axis_ratio),
         angle=reduced_angle(float(main.angle)),
         axis_ratio_interval=axis_ratio_interval,
         angle_interval=angle_interval,
+    )
+    try:
+        x, y = tangential_critical_curve(profiles, grid_spacing, half_width)
+    except ValueError as exc:
+        return replace(shape, critical_curve_note=str(exc))
+    return replace(
+        shape,
         critical_curve=(x, y),
         critical_curve_ellipse=fit_ellipse(x, y),
         critical_curve_einstein_radius=math.sqrt(abs(_polygon_area(x[:-1], y[:-1])) / math.pi),

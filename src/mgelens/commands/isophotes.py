@@ -208,6 +208,8 @@ def _phase_light(args: argparse.Namespace):
         axis_ratio_interval=interval.get("mass.axis_ratio"),
         angle_interval=interval.get("mass.angle"),
     )
+    if mass.critical_curve_note is not None:
+        logger.warning("%s: %s", args.phase, mass.critical_curve_note)
     return image, centre, mass, unit
 
 
