@@ -956,11 +956,10 @@ def test_interrupted_phase_resumes_to_the_uninterrupted_result(sp_run, mock_dir,
     assert not (results / "sp" / "result.json").exists()
     with caplog.at_level(logging.INFO, logger="mgelens.pipeline"):
         resumed = run.run_phase("sp", mock_dir, results, tiny_settings(), LENS, seed=3, threads=1)
-    # nautilus (the quick SP's sampler) does not count its resumes (SamplerOutput.n_resumes):
-    # its first line says how many calls the checkpoint held
     so_far = re.search(r"nautilus: .*, (\d+) calls so far", caplog.text)
     assert so_far
     assert int(so_far.group(1)) > 0
+    assert resumed.output.n_resumes == 1
     np.testing.assert_array_equal(resumed.output.samples, reference.output.samples)
     np.testing.assert_array_equal(resumed.output.log_weights, reference.output.log_weights)
     assert resumed.output.log_evidence == reference.output.log_evidence

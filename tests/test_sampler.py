@@ -389,6 +389,10 @@ def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
     reference = run_nested(GaussianLikelihood(), SPACE, settings, seed=4, log=lambda _: None)
     checkpoint = interrupted_nautilus(tmp_path, reference)
     written = checkpoint.with_suffix(".h5")
+    with h5py.File(written, "r") as stream:  # the interrupted session's own record
+        interrupted = dict(stream["mgelens"].attrs)
+    assert interrupted["n_resumes"] == 0
+    assert interrupted["runtime"] > 0
     lines: list[str] = []
     likelihood = GaussianLikelihood()
     resumed = run_nested(likelihood, SPACE, settings, checkpoint, 4, lines.append)
@@ -398,6 +402,13 @@ def test_nautilus_resumes_to_the_uninterrupted_run(tmp_path):
     np.testing.assert_array_equal(resumed.log_weights, reference.log_weights)
     assert resumed.log_evidence == reference.log_evidence
     assert resumed.n_calls == reference.n_calls
+    assert (reference.n_resumes, resumed.n_resumes) == (0, 1)
+    assert resumed.runtime > interrupted["runtime"]  # both sessions' seconds
+    with h5py.File(written, "r+") as stream:  # as an mgelens without the record wrote it
+        del stream["mgelens"]
+    again = run_nested(failing_likelihood, SPACE, settings, checkpoint, 4, lambda _: None)
+    assert again.n_calls == reference.n_calls  # the finished run, not sampled again
+    assert again.n_resumes == 1
     with pytest.raises(CheckpointMismatchError, match="seed"):
         run_nested(failing_likelihood, SPACE, settings, checkpoint, 5, lambda _: None)
     written.with_suffix(".fingerprint.json").unlink()  # e.g. a copied or older folder

@@ -82,9 +82,9 @@ class SamplerOutput:
     n_calls, n_rejected : int
         Likelihood calls and rejected samples, over all sessions of a resumed run.
     runtime : float
-        Wall-clock seconds spent sampling, over all sessions (nautilus: this session).
+        Wall-clock seconds spent sampling, over all sessions.
     n_resumes : int
-        How many times the run was resumed from its checkpoint (nautilus: always 0).
+        How many times the run was resumed from its checkpoint.
     method : str
     settings : dict
         :meth:`~mgelens.search.sampler_settings.SamplerSettings.to_dict` of the run.

@@ -20,7 +20,9 @@
   Nautilus checkpoints to ``<checkpoint stem>.h5`` (HDF5, no code), with the same sidecar:
   the sampler's state is written there atomically every ``checkpoint_every`` seconds (at
   least :data:`NAUTILUS_MIN_PROGRESS_INTERVAL`) and at the end, so a run killed while
-  writing resumes from the previous checkpoint (:func:`_write_nautilus_checkpoint`).
+  writing resumes from the previous checkpoint (:func:`_write_nautilus_checkpoint`), and
+  the file's ``mgelens`` group carries the sampling seconds and resumes that nautilus
+  itself does not keep.
 * **Enough live points for nautilus**: a nautilus run keeps at least
   :data:`NAUTILUS_LIVE_PER_PARAMETER` live points per free parameter; a smaller ``n_live``
   is raised to that, with a log line, and the output records the number used.
@@ -472,10 +474,29 @@ def _nautilus_checkpoint(checkpoint_path: Path | None) -> Path | None:
     return None if checkpoint_path is None else checkpoint_path.with_suffix(".h5")
 
 
-def _write_nautilus_checkpoint(sampler, checkpoint: Path) -> None:
+_RUN_STATE_GROUP = "mgelens"
+"""HDF5 group of a nautilus checkpoint holding what nautilus does not keep: the run's
+sampling seconds and resumes so far (attributes ``runtime`` and ``n_resumes``)."""
+
+
+def _nautilus_run_state(checkpoint: Path) -> tuple[float, int]:
+    """(sampling seconds, resumes) stored in a nautilus checkpoint by
+    :func:`_write_nautilus_checkpoint`; (0, 0) for a checkpoint of an mgelens that did not
+    store them (its run still resumes; its earlier seconds and resumes go uncounted)."""
+    import h5py
+
+    with h5py.File(checkpoint, "r") as file:
+        if _RUN_STATE_GROUP not in file:
+            return 0.0, 0
+        attributes = file[_RUN_STATE_GROUP].attrs
+        return float(attributes["runtime"]), int(attributes["n_resumes"])
+
+
+def _write_nautilus_checkpoint(sampler, checkpoint: Path, runtime: float, n_resumes: int) -> None:
     """Write ``sampler``'s whole state to ``checkpoint`` atomically: into a temporary
     ``.h5`` file beside it (nautilus insists on the suffix), then renamed onto it, so a run
-    killed while writing keeps the previous checkpoint.
+    killed while writing keeps the previous checkpoint. ``runtime`` (sampling seconds of
+    every session so far) and ``n_resumes`` go into its group :data:`_RUN_STATE_GROUP`.
 
     Nautilus itself, given a file, rewrites it whole after every new bound (every bound
     and network again each time; docs/benchmarks.md, "The samplers' own overheads") and
@@ -483,8 +504,14 @@ def _write_nautilus_checkpoint(sampler, checkpoint: Path) -> None:
     M2, one without its random state). The sampler therefore runs without a file, and
     this writes its state between ``Sampler.run`` calls, where it is consistent.
     """
+    import h5py
+
     with atomic_path(checkpoint, suffix=".h5") as temporary:
         sampler.write(temporary, overwrite=True)
+        with h5py.File(temporary, "r+") as file:
+            group = file.create_group(_RUN_STATE_GROUP)
+            group.attrs["runtime"] = runtime
+            group.attrs["n_resumes"] = n_resumes
 
 
 NAUTILUS_LIVE_PER_PARAMETER = 3
@@ -540,10 +567,13 @@ def _sample_nautilus(
         settings = replace(settings, n_live=n_live)
     filepath = _nautilus_checkpoint(checkpoint_path)
     resume_from = None
+    runtime_before, n_resumes = 0.0, 0
     if filepath is not None:
         fingerprint = _fingerprint(space, settings, seed)
         if filepath.exists():
             _check_sidecar(filepath, fingerprint)
+            runtime_before, n_resumes = _nautilus_run_state(filepath)
+            n_resumes += 1
             resume_from = filepath
         write_json(fingerprint_path(filepath), fingerprint)
     started = time.perf_counter()
@@ -583,14 +613,17 @@ def _sample_nautilus(
         while not converged and sampler.n_like < cap:
             now = time.perf_counter()
             if filepath is not None and now - written >= settings.checkpoint_every:
-                _write_nautilus_checkpoint(sampler, filepath)
+                _write_nautilus_checkpoint(
+                    sampler, filepath, runtime_before + now - started, n_resumes
+                )
                 written = now
             if now - logged >= settings.progress_every:
                 logged = now
                 log(_nautilus_progress(sampler, logged - started))
             converged = sampler.run(**options)
+        runtime = runtime_before + time.perf_counter() - started
         if filepath is not None:
-            _write_nautilus_checkpoint(sampler, filepath)  # the finished run
+            _write_nautilus_checkpoint(sampler, filepath, runtime, n_resumes)  # the finished run
         criteria = f"f_live {settings.f_live}, n_shell {settings.n_shell}, n_eff {settings.n_eff}"
         if converged:
             reason = f"stopping criteria reached ({criteria})"
@@ -613,8 +646,8 @@ def _sample_nautilus(
         log_evidence_error=math.sqrt(max(1.0 / n_eff - 1.0 / len(log_w), 0.0)),
         n_calls=n_calls,
         n_rejected=int(np.sum(all_log_l == -math.inf)),
-        runtime=time.perf_counter() - started,
-        n_resumes=0,
+        runtime=runtime,
+        n_resumes=n_resumes,
         method=settings.method,
         settings=settings.to_dict(),
         seed=seed,
