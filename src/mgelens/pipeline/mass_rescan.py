@@ -21,10 +21,14 @@ Before SPix1 samples (``slam.spix1_rescan``, the quick profile):
 4. Otherwise the mass and shear are polished from both (Powell, :data:`POLISH_CALLS`
    each, the centre boxed around the light and the mass kept plausible as in SP's start,
    :mod:`mgelens.pipeline.sp_start`), the coefficient chosen again on the grid after
-   each. If the best polished point beyond :data:`NEAR` of SP's θ_E beats SP's basin
-   (the best polished point within it; ``near`` if both polishes left it) by
-   :data:`THRESHOLD`, SPix1's mass and shear priors are re-centred on that point, their
-   widths as passed (SPEC §8.2).
+   each. Each polish holds θ_E within :data:`NEAR` of where it started (``near``'s within
+   NEAR of SP's θ_E, ``far``'s of the far point's): the scan has already compared the θ_E
+   values, and a polish free in θ_E can run, under a pixelized source that fits almost
+   anything, to a barely lensing mass that the images check then refuses, losing the
+   far basin with it (P05 on 1,000 source pixels: both free polishes ended at θ_E
+   0.44–0.55″, and SPix1 kept SP's 1.43″ for a true 1.18″; docs/coverage.md). If the
+   polished far point beats SP's polished basin by :data:`THRESHOLD`, SPix1's mass and
+   shear priors are re-centred on it, their widths as passed (SPEC §8.2).
 5. Where the scan kept SP's basin, SP's start's other polished points (those SP did not
    start from, :attr:`~mgelens.pipeline.sp_start.SPStart.polishes`) and its arcs' sphere
    (a round mass at the light centre with the θ_E of step 3's sphere, no shear;
@@ -39,9 +43,9 @@ Before SPix1 samples (``slam.spix1_rescan``, the quick profile):
    A point counts if it lies more than :data:`BASIN_WIDTHS` of SPix1's passed prior
    widths from their means (SP's posterior; :func:`widths_from_sp`), since within them
    SPix1 samples it anyway. If the best such point beats ``near`` by :data:`THRESHOLD`,
-   it and ``near`` are polished as in 4, and SPix1's priors are re-centred on the
-   polished point if it still lies beyond :data:`BASIN_WIDTHS` and beats the polished
-   ``near`` by :data:`THRESHOLD`.
+   it is polished with θ_E free and ``near`` as in 4, and SPix1's priors are re-centred
+   on the polished point if it still lies beyond :data:`BASIN_WIDTHS` and beats the
+   polished ``near`` by :data:`THRESHOLD`.
 6. Where nothing moved yet, SP's mass without its shear: the reference with the shear set
    to zero lies more than :data:`BASIN_WIDTHS` from SP's posterior when SP's shear is
    strong. θ_E is scanned as in 2 at zero shear, and the best point is polished
@@ -93,9 +97,17 @@ COEFFICIENT_GRID = 10.0 ** np.arange(-3.0, 5.01, 0.5)
 SHEAR_FREE_CALLS = 300
 """Evaluations of the first polish from SP's mass without its shear (step 6): on P25 it
 reached 19,973 of the 20,652 that 2,000 calls reach, after 100."""
-STEPS = ("theta_scan", "start_polishes", "arcs_sphere", "shear_free", "multiply_imaged")
+STEPS = (
+    "theta_scan",
+    "start_polishes",
+    "arcs_sphere",
+    "shear_free",
+    "multiply_imaged",
+    "held_polishes",
+)
 """The rescan's steps and its check of the point moved to (``lensing``: since
-2026-12-05 also that most of the lensed signal is multiply imaged), part of its record's
+2026-12-05 also that most of the lensed signal is multiply imaged; ``held_polishes``:
+since 2026-12-07 step 4's polishes and SP's polished basin hold θ_E), part of its record's
 fingerprint (a record made without one of them is made again)."""
 BASIN_WIDTHS = 1.0
 """Standardised distance (in SPix1's passed prior widths) beyond which one of SP's start's
@@ -217,9 +229,11 @@ def _polish(
     x: np.ndarray,
     centre: tuple[float, float],
     calls: int = POLISH_CALLS,
+    held_einstein_radius: float | None = None,
 ) -> tuple[np.ndarray, float]:
     """Powell on the mass and shear from ``x`` (centre boxed around the light centre,
     plausible mass and shear; ``calls`` evaluations), then the coefficient on the grid.
+    With ``held_einstein_radius`` (arcsec), θ_E is boxed within :data:`NEAR` of it.
 
     A start outside the box or the plausible limits is moved just inside them first: from
     a point the boxed posterior rejects Powell does not move (on slacs1250+0523 SP's mass
@@ -235,6 +249,13 @@ def _polish(
     inner = sp_start.PLAUSIBLE_SHRINK * half
     for i, c in zip(box, centre, strict=True):
         x[i] = np.clip(x[i], c - inner, c + inner)
+    if held_einstein_radius is not None:
+        theta = names.index("mass.einstein_radius")
+        box[theta] = (held_einstein_radius * (1 - NEAR), held_einstein_radius * (1 + NEAR))
+        shrink = sp_start.PLAUSIBLE_SHRINK * NEAR
+        x[theta] = np.clip(
+            x[theta], held_einstein_radius * (1 - shrink), held_einstein_radius * (1 + shrink)
+        )
     boxed = posterior.boxed(box, sp_start.plausible_mass(names))
     x, _ = sp_start._maximise(boxed, x, mass, None, calls)
     posterior.boxed({})
@@ -317,8 +338,16 @@ def rescan(
     polished = [None, None, None, None]
     polished_near = None
     moved = None
+
+    def polish_basin() -> tuple[np.ndarray, float]:
+        """SP's basin polished: from ``near``, θ_E held within NEAR of SP's."""
+        return _polish(posterior, near_x, centre, held_einstein_radius=reference[theta])
+
     if far_value >= near_value + THRESHOLD:
-        points = [_polish(posterior, x, centre) for x in (near_x, far_x)]
+        points = [
+            polish_basin(),
+            _polish(posterior, far_x, centre, held_einstein_radius=far_x[theta]),
+        ]
         polished_near = points[0]
         polished = [float(points[0][0][theta]), points[0][1], float(points[1][0][theta]),
                     points[1][1]]  # fmt: skip
@@ -337,7 +366,7 @@ def rescan(
         basin by :data:`THRESHOLD`; the polished ``x``'s θ_E, ln P and widths."""
         nonlocal polished_near, moved
         if polished_near is None:
-            polished_near = _polish(posterior, near_x, centre)
+            polished_near = polish_basin()
             polished[:2] = float(polished_near[0][theta]), polished_near[1]
         best, value = _polish(posterior, x, centre)
         record = [float(best[theta]), value, widths_from_sp(space, best)]
