@@ -115,8 +115,8 @@ MISSED_1000_UNFLAGGED = {
 carry ``flags`` (``mgelens quality`` on the chain's MASS result) for the mocks whose
 results were on the machine when the column was added (L00–L03, L06, P20, P22–P24)
 and the mocks fitted since (L04, L05, L07, L08, P00, P01, P02, P04, P03, P06, P10, P25
-fitted again, P07, P09, P11–P19, P34 and L09–L11, and P05 and P08); the others' are unknown and they are left out
-here."""
+fitted again, P07, P09, P11–P19, P34 and L09–L11, and P05 and P08); the others' are
+unknown and they are left out here."""
 
 STUDIES = {
     "paper model": (SAVED, MISSED),
