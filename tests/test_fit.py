@@ -9,6 +9,7 @@ from mgelens.fit import (
     LensModel,
     MGESource,
     PixelizedSource,
+    SourceSystem,
     figure_of_merit,
     fit,
     pixelized_operator,
@@ -18,6 +19,7 @@ from mgelens.fit_settings import FitSettings
 from mgelens.geometry import ell_comps_from
 from mgelens.grid import pixel_centres
 from mgelens.imaging import Imaging
+from mgelens.inversion.cholesky import InversionError
 from mgelens.inversion.system import WeightedBlurredMapping
 from mgelens.light import MGESet, Sersic
 from mgelens.mass import SIE, ExternalShear
@@ -153,6 +155,34 @@ def test_repeated_mass_and_source_reuse_the_source_system(sparse_pass, monkeypat
     moved = (SIE((0.02, -0.03), 1.12, 0.8, 40.0), MASS[1])
     fit(dataset, LensModel(mass=moved, lens_light=(first,), source=source))
     assert dataset._source_cache.get("system") is None
+
+
+def test_a_source_system_too_ill_conditioned_to_factorise_leaves_fits_to_the_general_route(
+    monkeypatch,
+):
+    """Where F_SS + H cannot be factorised whole (an unconverged SPix2's regularization of
+    4.6e5 did that to a LIGHT phase), the repeated source is not cached as a system, and
+    each fit is the general route's, equal to a fit on a fresh dataset."""
+    calls = []
+
+    def unfactorisable(*args):
+        calls.append(args)
+        raise InversionError("matrix not positive definite (potrf info 60)")
+
+    monkeypatch.setattr(SourceSystem, "build", unfactorisable)
+    rng = np.random.default_rng(5)
+    data = np.zeros(SHAPE)
+    data[~make_dataset().mask] = rng.normal(0.05, NOISE, make_dataset().data.size)
+    dataset = make_dataset(data)
+    source = pixelized_source(dataset, ConstantSplit(0.5))
+    model = LensModel(mass=MASS, lens_light=lens_sets()[:1], source=source)
+    results = [fit(dataset, model) for _ in range(3)]
+    assert len(calls) == 1  # tried once for this mass and source
+    assert "system" in dataset._source_cache
+    assert dataset._source_cache["system"] is None
+    fresh = fit(make_dataset(data), model)
+    for result in results:
+        assert result.log_evidence == pytest.approx(fresh.log_evidence, rel=1e-12)
 
 
 def test_the_source_system_keeps_the_factor_of_its_source_block():

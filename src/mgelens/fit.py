@@ -244,12 +244,19 @@ class FitDataset:
         mass model and the same source object, else ``None`` (then remembered as previous).
 
         Phases that keep mass and source fixed (LIGHT) then pay for tracing, mesh,
-        interpolation, F_SS and ln det H once; other phases pay nothing extra.
+        interpolation, F_SS and ln det H once; other phases pay nothing extra. Where
+        F_SS + H is too ill-conditioned to factorise whole (an extreme regularization
+        coefficient: the fixed part needs its Cholesky factor), this stays ``None`` for
+        that mass and source, and every fit takes the general route, which factorises only
+        the NNLS's passive set, as the phase that chose the source did.
         """
         cache = self._source_cache
         if cache.get("source") is source and cache.get("mass") == mass:
-            if cache.get("system") is None:
-                cache["system"] = SourceSystem.build(self, mass, source)
+            if "system" not in cache:
+                try:
+                    cache["system"] = SourceSystem.build(self, mass, source)
+                except InversionError:
+                    cache["system"] = None
             return cache["system"]
         cache.clear()
         cache.update(source=source, mass=mass)
