@@ -27,8 +27,9 @@ Before SPix1 samples (``slam.spix1_rescan``, the quick profile):
    anything, to a barely lensing mass that the images check then refuses, losing the
    far basin with it (P05 on 1,000 source pixels: both free polishes ended at θ_E
    0.44–0.55″, and SPix1 kept SP's 1.43″ for a true 1.18″; docs/coverage.md). If the
-   polished far point beats SP's polished basin by :data:`THRESHOLD`, SPix1's mass and
-   shear priors are re-centred on it, their widths as passed (SPEC §8.2).
+   polished far point still lies beyond NEAR of SP's θ_E and beats SP's polished basin by
+   :data:`THRESHOLD`, SPix1's mass and shear priors are re-centred on it, their widths as
+   passed (SPEC §8.2).
 5. Where the scan kept SP's basin, SP's start's other polished points (those SP did not
    start from, :attr:`~mgelens.pipeline.sp_start.SPStart.polishes`) and its arcs' sphere
    (a round mass at the light centre with the θ_E of step 3's sphere, no shear;
@@ -344,20 +345,10 @@ def rescan(
         return _polish(posterior, near_x, centre, held_einstein_radius=reference[theta])
 
     if far_value >= near_value + THRESHOLD:
-        points = [
-            polish_basin(),
-            _polish(posterior, far_x, centre, held_einstein_radius=far_x[theta]),
-        ]
-        polished_near = points[0]
-        polished = [float(points[0][0][theta]), points[0][1], float(points[1][0][theta]),
-                    points[1][1]]  # fmt: skip
-        baseline = max((v for x, v in points if in_sp_basin(x[theta])), default=near_value)
-        value, best = max(
-            ((v, x) for x, v in points if not in_sp_basin(x[theta])),
-            key=lambda pair: pair[0],
-            default=(-np.inf, None),
-        )
-        if value >= baseline + THRESHOLD:
+        polished_near = polish_basin()
+        best, value = _polish(posterior, far_x, centre, held_einstein_radius=far_x[theta])
+        polished = [float(polished_near[0][theta]), polished_near[1], float(best[theta]), value]
+        if not in_sp_basin(best[theta]) and value >= polished_near[1] + THRESHOLD:
             moved = _lensed(space, best, lensing)
 
     def contest(x: np.ndarray) -> list:

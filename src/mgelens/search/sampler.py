@@ -57,6 +57,7 @@ from pathlib import Path
 
 import dynesty
 import dynesty.utils
+import h5py
 import numpy as np
 from scipy import special
 
@@ -483,8 +484,6 @@ def _nautilus_run_state(checkpoint: Path) -> tuple[float, int]:
     """(sampling seconds, resumes) stored in a nautilus checkpoint by
     :func:`_write_nautilus_checkpoint`; (0, 0) for a checkpoint of an mgelens that did not
     store them (its run still resumes; its earlier seconds and resumes go uncounted)."""
-    import h5py
-
     with h5py.File(checkpoint, "r") as file:
         if _RUN_STATE_GROUP not in file:
             return 0.0, 0
@@ -504,8 +503,6 @@ def _write_nautilus_checkpoint(sampler, checkpoint: Path, runtime: float, n_resu
     M2, one without its random state). The sampler therefore runs without a file, and
     this writes its state between ``Sampler.run`` calls, where it is consistent.
     """
-    import h5py
-
     with atomic_path(checkpoint, suffix=".h5") as temporary:
         sampler.write(temporary, overwrite=True)
         with h5py.File(temporary, "r+") as file:
